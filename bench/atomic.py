@@ -62,9 +62,15 @@ def atomic_write_text(path: str | Path, text: str) -> None:
     atomic_write_bytes(path, text.encode("utf-8"))
 
 
+def dumps_json(obj: Any) -> str:
+    """Deterministic JSON text: sorted keys, 2-space indent, trailing newline; numpy values, arrays,
+    paths and sets converted."""
+    return json.dumps(obj, indent=2, sort_keys=True, default=_json_default) + "\n"
+
+
 def atomic_write_json(path: str | Path, obj: Any) -> None:
-    """Write ``obj`` as indented, key-sorted JSON to ``path`` atomically."""
-    atomic_write_text(path, json.dumps(obj, indent=2, sort_keys=True, default=_json_default) + "\n")
+    """Write ``obj`` as deterministic JSON (:func:`dumps_json`) to ``path`` atomically."""
+    atomic_write_text(path, dumps_json(obj))
 
 
 def _json_default(o: Any) -> Any:
@@ -76,4 +82,6 @@ def _json_default(o: Any) -> Any:
         return o.tolist()
     if isinstance(o, Path):
         return str(o)
+    if isinstance(o, (set, frozenset)):
+        return sorted(o)
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")

@@ -1,0 +1,312 @@
+"""Depth-prior effects: what monocular depth networks get wrong.
+
+All depth effects act on ``scene.mono_depth`` (N, H, W) float32 z-depth, only where it is valid
+(> 0): invalid pixels stay exactly 0 and the valid set never changes. Computation is float64, the
+result is stored as float32.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy import ndimage
+
+from bench.scene import Scene
+
+from ._params import param
+from .registry import register
+
+MIN_DEPTH = 1e-3  # metres: floor keeping a valid prior positive after a negative shift
+
+
+# ----------------------------------------------------------------------------- mono_depth_affine
+@dataclass(frozen=True)
+class DepthAffineParams:
+    scale: tuple[float, float] = param(
+        (0.5, 2.0), "range", lo=0.0, lo_open=True, unit="1", doc="per-view scale s_v, drawn uniformly"
+    )
+    shift: tuple[float, float] = param(
+        (0.0, 0.3), "range", unit="m (or x median depth)", doc="per-view shift t_v, drawn uniformly"
+    )
+    shift_mode: str = param(
+        "absolute",
+        "choice",
+        choices=("absolute", "relative"),
+        doc="'absolute': shift in metres; 'relative': shift times the view's median valid prior depth",
+    )
+
+
+@register("mono_depth_affine", DepthAffineParams, needs=("mono_depth",))
+def mono_depth_affine(scene: Scene, p: DepthAffineParams, rng: np.random.Generator) -> dict[str, Any]:
+    """Unknown per-view scale and shift of the depth prior (monocular depth is relative).
+
+    Models: relative (affine-invariant) monocular depth networks, whose output matches metric
+    z-depth only up to a scale and shift that differ from image to image.
+
+    ``d' = s_v * d + t_v`` on valid pixels, with ``s_v ~ U(scale)``, ``t_v ~ U(shift)`` (metres) or,
+    with ``shift_mode='relative'``, ``t_v ~ U(shift) * median(d[valid])``. Results below
+    ``MIN_DEPTH`` = 1 mm are clamped to it so priors stay positive where valid (counted in
+    ``sampled["clamped_px"]``; never happens for shift >= 0).
+
+    Parameters: scale (range, unitless, > 0), shift (range, metres or fraction of median depth),
+    shift_mode ('absolute' | 'relative').
+    """
+    depth = scene.mono_depth
+    scales, shifts, clamped = [], [], []
+    for v in range(depth.shape[0]):
+        d = depth[v].astype(np.float64)
+        valid = d > 0
+        s = float(rng.uniform(*p.scale))
+        t = float(rng.uniform(*p.shift))
+        if p.shift_mode == "relative":
+            t *= float(np.median(d[valid])) if valid.any() else 0.0
+        out = s * d + t
+        low = valid & (out < MIN_DEPTH)
+        out[low] = MIN_DEPTH
+        depth[v] = np.where(valid, out, 0.0).astype(np.float32)
+        scales.append(s)
+        shifts.append(t)
+        clamped.append(int(low.sum()))
+    return {"scale": scales, "shift_m": shifts, "clamped_px": clamped}
+
+
+# ----------------------------------------------------------------------------- depth_bleeding
+@dataclass(frozen=True)
+class DepthBleedingParams:
+    edge_width_px: int = param(
+        2, "int", lo=0, hi=64, unit="px", doc="half-width of the band blurred across occlusion boundaries (0 = off)"
+    )
+    edge_threshold: float = param(
+        0.1,
+        "float",
+        lo=0.0,
+        lo_open=True,
+        unit="1",
+        doc="occlusion boundary where abs(second difference of 1/z) > threshold * 1/z (0 on planes)",
+    )
+    edge_strength: float = param(1.0, "float", lo=0.0, hi=1.0, unit="1", doc="blend weight at the boundary")
+    thin_kernel_px: int = param(
+        5, "int", lo=0, hi=64, unit="px", doc="k of the k x k opening defining thin parts (< 2 = off)"
+    )
+    thin_pull: tuple[float, float] = param(
+        (0.2, 0.8), "range", lo=0.0, hi=1.0, unit="1", doc="fraction f pulling a thin part to the background depth"
+    )
+    thin_vanish_prob: float = param(
+        0.1, "float", lo=0.0, hi=1.0, unit="1", doc="probability a thin part vanishes (f = 1) in a view"
+    )
+
+
+def thin_mask(mask: np.ndarray, k: int) -> np.ndarray:
+    """Pixels of ``mask`` removed by a morphological opening with a k x k square: thin in image space.
+
+    The mask is edge-padded first so that touching the image border does not count as thin.
+
+    Args:
+        mask: (H, W) bool. k: kernel size in pixels (< 2 gives an empty result).
+
+    Returns:
+        (H, W) bool.
+    """
+    if k < 2 or not mask.any():
+        return np.zeros_like(mask, dtype=bool)
+    padded = np.pad(mask, k, mode="edge")
+    opened = ndimage.binary_opening(padded, structure=np.ones((k, k), dtype=bool))[k:-k, k:-k]
+    return mask & ~opened
+
+
+def depth_discontinuities(depth: np.ndarray, threshold: float) -> np.ndarray:
+    """Occlusion-boundary pixels of a z-depth map (0 = invalid).
+
+    Inverse depth is affine in pixel coordinates on a plane, so its second difference is 0 on planes
+    (also at grazing angles) and large where the surface jumps. A pixel is marked when, along rows or
+    columns, all three pixels are valid and ``|s[i-1] - 2 s[i] + s[i+1]| > threshold * s[i]``, s = 1/z.
+
+    Returns:
+        (H, W) bool.
+    """
+    valid = depth > 0
+    s = np.where(valid, 1.0 / np.where(valid, depth, 1.0), 0.0)
+    disc = np.zeros(depth.shape, dtype=bool)
+    # along columns (u)
+    dd = np.abs(s[:, :-2] - 2 * s[:, 1:-1] + s[:, 2:])
+    ok = valid[:, :-2] & valid[:, 1:-1] & valid[:, 2:]
+    disc[:, 1:-1] |= ok & (dd > threshold * s[:, 1:-1])
+    # along rows (v)
+    dd = np.abs(s[:-2] - 2 * s[1:-1] + s[2:])
+    ok = valid[:-2] & valid[1:-1] & valid[2:]
+    disc[1:-1] |= ok & (dd > threshold * s[1:-1])
+    return disc
+
+
+@register("depth_bleeding", DepthBleedingParams, needs=("mono_depth",))
+def depth_bleeding(scene: Scene, p: DepthBleedingParams, rng: np.random.Generator) -> dict[str, Any]:
+    """Prior errors where monocular networks fail: occlusion boundaries and thin structures.
+
+    Models: (a) the smooth, low-resolution decoders of monocular networks bleed depth between a
+    foreground object and the background behind it; (b) thin structures (chair legs, poles, stems)
+    are under-resolved and their depth is pulled towards the background around them, differently in
+    every view, sometimes dropped entirely -- the multi-view inconsistency MonoInstance's density
+    uncertainty detects (paper Sec. 1, 3.2, Fig. 3: chair legs).
+
+    (b) Thin parts: for every foreground GT instance (``instances[id].is_background`` False, or not in
+    the table) visible in a view, its thin pixels are those a ``thin_kernel_px`` x ``thin_kernel_px``
+    opening removes. Each 8-connected thin component gets, independently per view,
+    ``f ~ U(thin_pull)``, or ``f = 1`` with probability ``thin_vanish_prob`` (the part vanishes), and
+    ``d' = (1 - f) d + f d_bg`` with ``d_bg`` the prior depth of the nearest valid pixel outside the
+    instance (the surrounding background). Needs ``gt_instance``; skipped when absent.
+
+    (a) Boundaries: occlusion boundaries are found on ``gt_depth`` (else on the prior) with
+    :func:`depth_discontinuities`. Within ``edge_width_px`` of a boundary the prior is blended toward
+    its (2w+1) x (2w+1) box average over valid pixels; the weight falls linearly from
+    ``edge_strength`` at the boundary to 0 at distance w (pixels).
+
+    Parameters: edge_width_px (px), edge_threshold (relative), edge_strength (0-1), thin_kernel_px
+    (px), thin_pull (range of fractions in [0, 1]), thin_vanish_prob (probability).
+    """
+    depth = scene.mono_depth
+    n_views = depth.shape[0]
+    pulls: list[list[float]] = []
+    thin_px: list[int] = []
+    edge_px: list[int] = []
+    for v in range(n_views):
+        d = depth[v].astype(np.float64)
+        valid = d > 0
+        out = d.copy()
+        view_pulls: list[float] = []
+        n_thin = 0
+        # (b) thin structures, per foreground instance
+        if p.thin_kernel_px >= 2 and scene.gt_instance is not None:
+            inst = scene.gt_instance[v]
+            for iid in np.unique(inst):
+                iid = int(iid)
+                if iid == 0:
+                    continue
+                info = scene.instances.get(iid)
+                if info is not None and info.is_background:
+                    continue
+                mask = inst == iid
+                thin = thin_mask(mask, p.thin_kernel_px) & valid
+                source = valid & ~mask
+                if not thin.any() or not source.any():
+                    continue
+                _, (iy, ix) = ndimage.distance_transform_edt(~source, return_indices=True)
+                d_bg = d[iy, ix]
+                labels, n_comp = ndimage.label(thin, structure=np.ones((3, 3), dtype=bool))
+                for c in range(1, n_comp + 1):
+                    f = float(rng.uniform(*p.thin_pull))
+                    if rng.random() < p.thin_vanish_prob:
+                        f = 1.0
+                    comp = labels == c
+                    out[comp] = (1.0 - f) * d[comp] + f * d_bg[comp]
+                    view_pulls.append(f)
+                n_thin += int(thin.sum())
+        # (a) bleeding across occlusion boundaries
+        n_edge = 0
+        if p.edge_width_px > 0 and p.edge_strength > 0:
+            ref = scene.gt_depth[v] if scene.gt_depth is not None else depth[v]
+            disc = depth_discontinuities(ref.astype(np.float64), p.edge_threshold) & valid
+            if disc.any():
+                w = p.edge_width_px
+                dist = ndimage.distance_transform_edt(~disc)
+                weight = p.edge_strength * np.clip(1.0 - dist / w, 0.0, 1.0)
+                size = 2 * w + 1
+                num = ndimage.uniform_filter(np.where(valid, out, 0.0), size=size, mode="nearest")
+                den = ndimage.uniform_filter(valid.astype(np.float64), size=size, mode="nearest")
+                blur = np.where(den > 1e-9, num / np.maximum(den, 1e-9), out)
+                band = valid & (weight > 0)
+                out[band] = out[band] + weight[band] * (blur[band] - out[band])
+                n_edge = int(band.sum())
+        depth[v] = np.where(valid, out, 0.0).astype(np.float32)
+        pulls.append(view_pulls)
+        thin_px.append(n_thin)
+        edge_px.append(n_edge)
+    return {"thin_pull": pulls, "thin_px": thin_px, "edge_px": edge_px}
+
+
+# ----------------------------------------------------------------------------- lowfreq_warp
+@dataclass(frozen=True)
+class LowFreqWarpParams:
+    amplitude: float = param(
+        0.1, "float", lo=0.0, hi=0.9, unit="1", doc="max abs(w) of the multiplicative warp d' = d (1 + w)"
+    )
+    n_terms: int = param(3, "int", lo=1, hi=32, unit="1", doc="number of random 2D cosines summed")
+    max_freq: float = param(
+        1.0,
+        "float",
+        lo=0.0,
+        lo_open=True,
+        hi=8.0,
+        unit="cycles / image",
+        doc="frequencies drawn in [0.5, 1] x max_freq cycles across the longer image side",
+    )
+
+
+@register("lowfreq_warp", LowFreqWarpParams, needs=("mono_depth",))
+def lowfreq_warp(scene: Scene, p: LowFreqWarpParams, rng: np.random.Generator) -> dict[str, Any]:
+    """Smooth low-frequency multiplicative per-view warp: global bending of monocular depth.
+
+    Models: monocular depth that is locally plausible but globally bent (planes curved, far parts
+    compressed), differently in every image -- a shape error no per-view scale/shift removes.
+
+    Per view ``w(x, y) = sum_k a_k cos(2 pi r_k (cos th_k x + sin th_k y) + phi_k)`` with x, y the pixel
+    coordinates divided by the longer image side, ``a_k ~ N(0, 1)``, ``r_k ~ U(0.5, 1) max_freq``,
+    ``th_k, phi_k ~ U(0, 2 pi)``; w is made zero-mean over the image (a mean is only a scale) and scaled
+    to ``max |w| = amplitude``. ``d' = d (1 + w)`` on valid pixels.
+
+    Parameters: amplitude (fraction, <= 0.9 so priors stay positive), n_terms (count), max_freq
+    (cycles per longer image side).
+    """
+    depth = scene.mono_depth
+    n_views, h, w_px = depth.shape
+    side = float(max(h, w_px))
+    x, y = np.meshgrid((np.arange(w_px) + 0.5) / side, (np.arange(h) + 0.5) / side)
+    peak = []
+    for v in range(n_views):
+        warp = np.zeros((h, w_px))
+        for _ in range(p.n_terms):
+            a = rng.standard_normal()
+            r = rng.uniform(0.5, 1.0) * p.max_freq
+            th = rng.uniform(0.0, 2 * np.pi)
+            phi = rng.uniform(0.0, 2 * np.pi)
+            warp += a * np.cos(2 * np.pi * r * (np.cos(th) * x + np.sin(th) * y) + phi)
+        warp -= warp.mean()
+        m = np.abs(warp).max()
+        warp = warp * (p.amplitude / m) if m > 1e-12 else np.zeros_like(warp)
+        d = depth[v].astype(np.float64)
+        depth[v] = np.where(d > 0, d * (1.0 + warp), 0.0).astype(np.float32)
+        peak.append(float(np.abs(warp).max()))
+    return {"max_abs_warp": peak}
+
+
+# ----------------------------------------------------------------------------- depth_noise
+@dataclass(frozen=True)
+class DepthNoiseParams:
+    sigma: float = param(0.01, "float", lo=0.0, hi=0.5, unit="1 (relative)", doc="std of the multiplicative noise")
+    correlation_px: float = param(
+        0.0, "float", lo=0.0, hi=64.0, unit="px", doc="Gaussian sigma correlating the noise field (0 = white)"
+    )
+
+
+@register("depth_noise", DepthNoiseParams, needs=("mono_depth",))
+def depth_noise(scene: Scene, p: DepthNoiseParams, rng: np.random.Generator) -> None:
+    """Multiplicative Gaussian noise on the depth prior.
+
+    Models: per-pixel jitter of network predictions (white), or, with ``correlation_px`` > 0, blotchy
+    spatially correlated errors (e.g. a stochastic diffusion sampler). ``d' = d max(1 + sigma n, 0.1)``
+    with n a unit-variance field: white N(0, 1), or N(0, 1) smoothed by a Gaussian of
+    ``correlation_px`` pixels and renormalised to unit std. Independent per view.
+
+    Parameters: sigma (relative std, <= 0.5), correlation_px (pixels).
+    """
+    depth = scene.mono_depth
+    for v in range(depth.shape[0]):
+        n = rng.standard_normal(depth.shape[1:])
+        if p.correlation_px > 0:
+            n = ndimage.gaussian_filter(n, p.correlation_px, mode="reflect")
+            std = n.std()
+            n = n / std if std > 1e-12 else np.zeros_like(n)
+        d = depth[v].astype(np.float64)
+        depth[v] = np.where(d > 0, d * np.maximum(1.0 + p.sigma * n, 0.1), 0.0).astype(np.float32)
+    return None

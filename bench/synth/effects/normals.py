@@ -1,0 +1,158 @@
+"""Normal priors consistent with the (perturbed) depth prior."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from bench.scene import Scene, pixel_rays_camera
+
+from ._params import param
+from .registry import register
+
+
+def _one_sided_gradient(p: np.ndarray, valid: np.ndarray, z: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
+    """Finite difference of points ``p`` (H, W, 3) along ``axis`` (1 = u, 0 = v).
+
+    Uses the forward or backward difference whose two pixels are valid, preferring the one with the
+    smaller depth change (so occlusion boundaries do not smear the normal). Returns (grad, ok).
+    """
+    fwd = np.zeros_like(p)
+    bwd = np.zeros_like(p)
+    dz_f = np.full(z.shape, np.inf)
+    dz_b = np.full(z.shape, np.inf)
+    if axis == 1:
+        diff = p[:, 1:] - p[:, :-1]
+        pair = valid[:, 1:] & valid[:, :-1]
+        dz = np.abs(z[:, 1:] - z[:, :-1])
+        fwd[:, :-1], bwd[:, 1:] = diff, diff
+        dz_f[:, :-1] = np.where(pair, dz, np.inf)
+        dz_b[:, 1:] = np.where(pair, dz, np.inf)
+    else:
+        diff = p[1:] - p[:-1]
+        pair = valid[1:] & valid[:-1]
+        dz = np.abs(z[1:] - z[:-1])
+        fwd[:-1], bwd[1:] = diff, diff
+        dz_f[:-1] = np.where(pair, dz, np.inf)
+        dz_b[1:] = np.where(pair, dz, np.inf)
+    use_f = dz_f <= dz_b
+    grad = np.where(use_f[..., None], fwd, bwd)
+    ok = np.isfinite(np.minimum(dz_f, dz_b))
+    return grad, ok
+
+
+def normals_from_depth(depth: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Camera-frame unit normals of a z-depth map by back-projection and finite differences.
+
+    Points ``P = d * inv(K) [u, v, 1]`` (OpenCV axes); ``n = dP/du x dP/dv`` with one-sided
+    differences (see :func:`_one_sided_gradient`), normalised and oriented towards the camera
+    (``n . P < 0``). Pixels with no valid neighbour along u or v (isolated, 1-px structures) get the
+    normal facing the camera, ``-P / |P|``.
+
+    Args:
+        depth: (H, W) z-depth in metres, 0 = invalid.
+        K: (3, 3) intrinsics in pixels.
+
+    Returns:
+        (H, W, 3) float64 unit normals, 0 where depth is invalid.
+    """
+    h, w = depth.shape
+    valid = depth > 0
+    dirs = pixel_rays_camera(K, h, w)
+    pts = dirs * depth[..., None]
+    gu, ok_u = _one_sided_gradient(pts, valid, depth, axis=1)
+    gv, ok_v = _one_sided_gradient(pts, valid, depth, axis=0)
+    n = np.cross(gu, gv)
+    norm = np.linalg.norm(n, axis=-1)
+    good = valid & ok_u & ok_v & (norm > 1e-12)
+    facing = -dirs / np.linalg.norm(dirs, axis=-1, keepdims=True)
+    n = np.where(good[..., None], n / np.where(good, norm, 1.0)[..., None], facing)
+    return _orient_and_mask(n, dirs, valid)
+
+
+def _orient_and_mask(n: np.ndarray, dirs: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Normalise, flip towards the camera, fall back to facing the camera if degenerate, zero invalid."""
+    norm = np.linalg.norm(n, axis=-1, keepdims=True)
+    facing = -dirs / np.linalg.norm(dirs, axis=-1, keepdims=True)
+    n = np.where(norm > 1e-9, n / np.maximum(norm, 1e-12), facing)
+    flip = np.sum(n * dirs, axis=-1) > 0
+    n = np.where(flip[..., None], -n, n)
+    return np.where(valid[..., None], n, 0.0)
+
+
+def _align_scale_shift(pred: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Least-squares ``s pred + t ~ target`` over pixels valid in both; identity if degenerate or s <= 0."""
+    m = (pred > 0) & (target > 0)
+    if m.sum() < 3:
+        return pred
+    a = np.stack([pred[m], np.ones(int(m.sum()))], axis=1)
+    (s, t), *_ = np.linalg.lstsq(a, target[m], rcond=None)
+    if not (np.isfinite(s) and np.isfinite(t)) or s <= 0:
+        return pred
+    out = s * pred + t
+    # keep the valid set and positivity of the prior
+    return np.where(pred > 0, np.maximum(out, 1e-3), 0.0)
+
+
+@dataclass(frozen=True)
+class NormalFromDepthParams:
+    blend_gt: float = param(
+        0.0, "float", lo=0.0, hi=1.0, unit="1", doc="weight of the GT normal in the blend (0 = depth-derived only)"
+    )
+    smooth_px: float = param(
+        0.0, "float", lo=0.0, hi=32.0, unit="px", doc="Gaussian sigma smoothing the normal field (0 = none)"
+    )
+    align_to_gt: bool = param(
+        True,
+        "bool",
+        doc="fit the prior depth to GT depth by per-view scale/shift before differentiating, so the "
+        "unknown shift does not shear the normals",
+    )
+
+
+@register("normal_from_depth", NormalFromDepthParams, needs=("mono_depth", "intrinsics"))
+def normal_from_depth(scene: Scene, p: NormalFromDepthParams, rng: np.random.Generator) -> None:
+    """Normal priors recomputed from the (perturbed) depth prior, so depth errors show in normals.
+
+    Models: monocular depth and normals come from the same foundation model and fail in the same
+    regions (paper Sec. 4.1: "the monocular normals are homologous with depths"). Without this effect
+    ``mono_normal`` keeps whatever it held (exact GT normals at synthesis).
+
+    Per view: (optionally) align the depth prior to ``gt_depth`` by least-squares scale/shift --
+    real normal networks do not inherit the depth's unknown shift, which would shear the normals --
+    then :func:`normals_from_depth` with the view's K; blend ``(1 - blend_gt) n + blend_gt n_gt``
+    where GT is valid; smooth each component with a Gaussian of ``smooth_px`` pixels over valid
+    pixels; renormalise to unit length and orient towards the camera; 0 where the depth prior is
+    invalid. Deterministic (draws nothing from ``rng``).
+
+    Parameters: blend_gt (weight in [0, 1]), smooth_px (pixels), align_to_gt (bool).
+    """
+    depth = scene.mono_depth
+    n_views, h, w = depth.shape
+    if scene.mono_normal is None:
+        scene.mono_normal = np.zeros((n_views, h, w, 3), dtype=np.float32)
+    for v in range(n_views):
+        d = depth[v].astype(np.float64)
+        valid = d > 0
+        if p.align_to_gt and scene.gt_depth is not None:
+            d = _align_scale_shift(d, scene.gt_depth[v].astype(np.float64))
+        K = np.asarray(scene.intrinsics[v], dtype=np.float64)
+        n = normals_from_depth(d, K)
+        dirs = pixel_rays_camera(K, h, w)
+        if p.blend_gt > 0 and scene.gt_normal is not None:
+            g = scene.gt_normal[v].astype(np.float64)
+            has_gt = np.linalg.norm(g, axis=-1) > 0.5
+            n = np.where(has_gt[..., None], (1.0 - p.blend_gt) * n + p.blend_gt * g, n)
+            n = _orient_and_mask(n, dirs, valid)
+        if p.smooth_px > 0:
+            wv = valid.astype(np.float64)
+            den = ndimage.gaussian_filter(wv, p.smooth_px, mode="nearest")
+            num = np.stack(
+                [ndimage.gaussian_filter(n[..., c] * wv, p.smooth_px, mode="nearest") for c in range(3)], axis=-1
+            )
+            n = np.where(den[..., None] > 1e-9, num / np.maximum(den, 1e-9)[..., None], n)
+            n = _orient_and_mask(n, dirs, valid)
+        scene.mono_normal[v] = n.astype(np.float32)
+    return None

@@ -1,0 +1,239 @@
+"""Scene layouts: objects + cameras + image size for the three scene kinds.
+
+* ``room`` (ScanNet-like / Replica-like presets): a closed room with furniture that has thin parts
+  (chair and table legs, a lamp pole, plant stems, shelf boards) and big planar surfaces; cameras walk
+  a loop inside the room. Furniture is placed away from the camera path so no camera is inside an object.
+* ``object`` (DTU-like): one object with thin parts on a ground plane; 3 sparse, little-overlap
+  training views plus dense views used only to build the evaluation observation mask.
+* ``forward`` (LLFF-like): several objects at different depths in front of a back wall; about 20
+  forward-facing views on a small planar grid.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import trimesh
+
+from bench.errors import BenchInputError
+from bench.synth import cameras as cams
+from bench.synth.geometry import (
+    FURNITURE,
+    PALETTE,
+    SceneObject,
+    _box,
+    _jitter_colour,
+    build_room_shell,
+    load_user_mesh,
+    place_on_floor,
+)
+from bench.synth.recipe import Recipe, resolve_mesh_path
+
+ROOM_PRESETS: dict[str, dict[str, Any]] = {
+    # ScanNet: hand-held RGB-D sweeps of ordinary rooms; shaky trajectories.
+    "scannet": {
+        "size": [4.2, 3.6, 2.6],
+        "objects": [{"type": "table"}, {"type": "chair", "count": 3}, {"type": "lamp"}, {"type": "plant"}, {"type": "cabinet"}, {"type": "sofa"}],
+        "jitter": 0.15,
+        "hfov": 65.0,
+        "views": {"tiny": 16, "small": 48, "medium": 96, "large": 200},
+        "image": {"tiny": [64, 48], "small": [128, 96], "medium": [192, 144], "large": [384, 288]},
+    },
+    # Replica: clean reconstructions of larger, fuller rooms; smooth synthetic trajectories.
+    "replica": {
+        "size": [5.0, 4.2, 2.8],
+        "objects": [
+            {"type": "table"}, {"type": "chair", "count": 4}, {"type": "lamp", "count": 2}, {"type": "plant", "count": 2},
+            {"type": "shelf"}, {"type": "sofa"}, {"type": "cabinet"},
+        ],
+        "jitter": 0.05,
+        "hfov": 70.0,
+        "views": {"tiny": 16, "small": 64, "medium": 128, "large": 250},
+        "image": {"tiny": [64, 48], "small": [128, 96], "medium": [192, 144], "large": [384, 288]},
+    },
+}
+
+
+@dataclass
+class Layout:
+    """Objects and cameras of a scene, before rendering.
+
+    Attributes:
+        objects: instances in id order (instance id = index + 1).
+        K: (N, 3, 3) intrinsics; poses: (N, 4, 4) camera-to-world (OpenCV); height, width: pixels.
+        scale_mat: (4, 4) normalised -> world (maps the unit sphere onto the region of interest).
+        splits: view index arrays by split name.
+        info: layout facts recorded in the dataset metadata.
+    """
+
+    objects: list[SceneObject]
+    K: np.ndarray
+    poses: np.ndarray
+    height: int
+    width: int
+    scale_mat: np.ndarray
+    splits: dict[str, np.ndarray] = field(default_factory=dict)
+    info: dict[str, Any] = field(default_factory=dict)
+
+
+def _sphere_scale_mat(centre: np.ndarray, radius: float) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, :3] *= radius
+    m[:3, 3] = centre
+    return m
+
+
+def _image_size(recipe: Recipe, scale: str, default: Any) -> tuple[int, int]:
+    wh = recipe.get("image", scale=scale, default=None)
+    if wh is None:
+        wh = default[scale] if isinstance(default, dict) else default
+    if not (isinstance(wh, (list, tuple)) and len(wh) == 2 and all(isinstance(v, int) and v >= 8 for v in wh)):
+        raise BenchInputError(recipe.where("image"), f"image must be [width, height] integers >= 8, got {wh!r}")
+    return int(wh[0]), int(wh[1])
+
+
+def _make_object(recipe: Recipe, spec: dict[str, Any], name: str, rng: np.random.Generator) -> tuple[trimesh.Trimesh, str, bool]:
+    """Build one local-frame object from a recipe entry -> (mesh, category, is_thin)."""
+    kind = spec["type"]
+    if kind == "mesh":
+        path = resolve_mesh_path(recipe, spec["path"])
+        size = float(spec.get("size", 0.5))
+        mesh = load_user_mesh(path, size, recipe.where("objects"))
+        return mesh, str(spec.get("category", path.stem)), bool(spec.get("thin", False))
+    mesh, thin = FURNITURE[kind](rng)
+    if "size" in spec:  # rescale so the largest extent is `size` metres
+        mesh = mesh.copy()
+        mesh.apply_scale(float(spec["size"]) / float(np.max(mesh.extents)))
+    return mesh, kind, thin
+
+
+def _expand(specs: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    out = []
+    for s in specs:
+        out.extend([s] * int(s.get("count", 1)))
+    return out
+
+
+def _scene_object(name: str, category: str, mesh: trimesh.Trimesh, thin: bool, rng: np.random.Generator) -> SceneObject:
+    base, tex = PALETTE.get(category, PALETTE["mesh"])
+    return SceneObject(name=name, category=category, mesh=mesh, is_background=False, is_thin=thin,
+                       albedo=_jitter_colour(rng, base), texture=tex, texture_scale=float(rng.uniform(0.08, 0.2)))
+
+
+def build_room(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layout:
+    preset_name = recipe.raw.get("preset", recipe.format)
+    if preset_name not in ROOM_PRESETS:
+        raise BenchInputError(recipe.where("preset"), f"room preset must be one of {sorted(ROOM_PRESETS)}, got {preset_name!r}")
+    preset = ROOM_PRESETS[preset_name]
+    size = recipe.get("room", "size", scale=scale, default=None)
+    if size is None:
+        size = [s * rng.uniform(0.9, 1.1) for s in preset["size"]]
+    if not (isinstance(size, list) and len(size) == 3 and all(isinstance(v, (int, float)) and v > 1.0 for v in size)):
+        raise BenchInputError(recipe.where("room", "size"), f"room size must be 3 numbers > 1 m, got {size!r}")
+    size = tuple(float(v) for v in size)
+    n_views = int(recipe.get("cameras", "views", scale=scale, default=preset["views"][scale] if scale in preset["views"] else None) or 0)
+    if n_views < 2:
+        raise BenchInputError(recipe.where("cameras", "views"), f"need >= 2 views, got {n_views}")
+    width, height = _image_size(recipe, scale, preset["image"])
+    jitter = float(recipe.get("cameras", "jitter", scale=scale, default=preset["jitter"]))
+    hfov = float(recipe.get("cameras", "hfov", scale=scale, default=preset["hfov"]))
+    height_range = tuple(recipe.get("cameras", "height", scale=scale, default=[1.2, 1.6]))
+
+    poses = cams.room_path(size, n_views, rng, height_range=height_range, jitter=jitter)
+    clear = [np.array([p[:2, 3] - 0.25, p[:2, 3] + 0.25]) for p in poses]
+
+    objects = build_room_shell(size, rng)
+    specs = _expand(recipe.raw.get("objects") or preset["objects"])
+    counts: dict[str, int] = {}
+    items = []
+    for spec in specs:
+        mesh, category, thin = _make_object(recipe, spec, "", rng)
+        name = f"{category}_{counts.get(category, 0)}"
+        counts[category] = counts.get(category, 0) + 1
+        items.append((name, category, mesh, thin))
+    items.sort(key=lambda it: -float(np.prod(it[2].extents[:2])))  # big footprints first
+    margin = 0.15
+    placed = place_on_floor(items, np.array([margin, margin]), np.array([size[0] - margin, size[1] - margin]), rng, keep_clear=clear)
+    for name, category, mesh, thin in placed:
+        objects.append(_scene_object(name, category, mesh, thin, rng))
+    dropped = sorted({n for n, *_ in items} - {n for n, *_ in placed})
+
+    K = np.repeat(cams.intrinsics(width, height, hfov)[None], n_views, axis=0)
+    centre = np.array(size) / 2
+    radius = 0.5 * float(np.linalg.norm(size)) * 1.05
+    return Layout(objects, K, poses, height, width, _sphere_scale_mat(centre, radius),
+                  splits={"train": np.arange(n_views)},
+                  info={"preset": preset_name, "room_size_m": list(size), "objects_not_placed": dropped, "hfov_deg": hfov})
+
+
+def build_object(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layout:
+    spec = recipe.raw.get("object") or {"type": "plant"}
+    mesh, category, thin = _make_object(recipe, spec, "object", rng)
+    if spec["type"] != "mesh" and "size" not in spec:
+        mesh = mesh.copy()
+        mesh.apply_scale(0.5 / float(np.max(mesh.extents)))
+    mesh = mesh.copy()
+    mesh.apply_translation([-mesh.bounds[:, 0].mean(), -mesh.bounds[:, 1].mean(), 0.0])
+    obj = _scene_object(f"{category}_0", category, mesh, thin, rng)
+    ground = SceneObject("ground", "ground", _box((3.0, 3.0, 0.05), (0.0, 0.0, -0.025)), is_background=True, is_thin=False,
+                         albedo=_jitter_colour(rng, (0.45, 0.45, 0.5)), texture="tiles", texture_scale=0.25)
+    extent = float(np.max(mesh.extents))
+    centre = mesh.bounds.mean(axis=0)
+    width, height = _image_size(recipe, scale, {"tiny": [64, 48], "small": [128, 96], "medium": [200, 150], "large": [400, 300]})
+    distance = float(recipe.get("cameras", "distance", scale=scale, default=2.6 * extent))
+    hfov = float(recipe.get("cameras", "hfov", scale=scale, default=40.0))
+    train_az = np.asarray(recipe.get("cameras", "train_azimuths", scale=scale, default=[-40.0, 0.0, 40.0]), dtype=float)
+    train_el = np.asarray(recipe.get("cameras", "train_elevations", scale=scale, default=[30.0, 25.0, 35.0]), dtype=float)
+    n_eval = int(recipe.get("cameras", "eval_views", scale=scale, default={"tiny": 8, "small": 24, "medium": 48, "large": 64}[scale]))
+    eval_az = np.linspace(-90.0, 90.0, n_eval) + rng.uniform(-3, 3, n_eval)
+    eval_el = rng.uniform(15.0, 60.0, n_eval)
+    poses = np.concatenate([cams.sphere_views(centre, distance, train_az, train_el), cams.sphere_views(centre, distance, eval_az, eval_el)])
+    n = len(poses)
+    K = np.repeat(cams.intrinsics(width, height, hfov)[None], n, axis=0)
+    radius = 0.5 * float(np.linalg.norm(mesh.extents)) * 1.1
+    return Layout([ground, obj], K, poses, height, width, _sphere_scale_mat(centre, radius),
+                  splits={"train": np.arange(len(train_az)), "eval_only": np.arange(len(train_az), n)},
+                  info={"object_extent_m": extent, "camera_distance_m": distance, "hfov_deg": hfov})
+
+
+def build_forward(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layout:
+    specs = _expand(recipe.raw.get("objects") or [{"type": "plant"}, {"type": "lamp"}, {"type": "chair"}, {"type": "table"}, {"type": "cabinet"}])
+    far = 6.0
+    objects = [
+        SceneObject("ground", "floor", _box((8.0, far + 1, 0.05), (0.0, far / 2, -0.025)), True, False, _jitter_colour(rng, (0.5, 0.45, 0.4)), "tiles", 0.4),
+        SceneObject("back_wall", "wall", _box((8.0, 0.05, 4.0), (0.0, far, 2.0)), True, False, _jitter_colour(rng, (0.75, 0.75, 0.7)), "none", 0.5),
+    ]
+    depths = np.linspace(1.6, 4.5, len(specs)) + rng.uniform(-0.2, 0.2, len(specs))
+    counts: dict[str, int] = {}
+    for i, (spec, y) in enumerate(zip(specs, depths)):
+        mesh, category, thin = _make_object(recipe, spec, "", rng)
+        x = (i - (len(specs) - 1) / 2) * 0.55 * (y / 2.5) + rng.uniform(-0.1, 0.1)
+        mesh = mesh.copy()
+        mesh.apply_translation([x - mesh.bounds[:, 0].mean(), y - mesh.bounds[:, 1].mean(), 0.0])
+        name = f"{category}_{counts.get(category, 0)}"
+        counts[category] = counts.get(category, 0) + 1
+        objects.append(_scene_object(name, category, mesh, thin, rng))
+    width, height = _image_size(recipe, scale, {"tiny": [128, 96], "small": [256, 192], "medium": [504, 378], "large": [1008, 756]})
+    grid = tuple(recipe.get("cameras", "grid", scale=scale, default=[5, 4]))
+    spacing = tuple(recipe.get("cameras", "spacing", scale=scale, default=[0.08, 0.06]))
+    hfov = float(recipe.get("cameras", "hfov", scale=scale, default=60.0))
+    poses = cams.forward_grid(np.array([0.0, 0.0, 1.0]), grid, spacing, look_distance=3.0, rng=rng)
+    n = len(poses)
+    K = np.repeat(cams.intrinsics(width, height, hfov)[None], n, axis=0)
+    # LLFF protocol (FSGS): images sorted by name, test = every 8th, 3 train views evenly spaced over the rest.
+    test = np.arange(0, n, 8)
+    rest = np.setdiff1d(np.arange(n), test)
+    train = rest[np.round(np.linspace(0, len(rest) - 1, 3)).astype(int)]
+    centre = np.array([0.0, far / 2, 1.0])
+    return Layout(objects, K, poses, height, width, _sphere_scale_mat(centre, far / 2 + 1.0),
+                  splits={"train": train, "test": test}, info={"grid": list(grid), "spacing_m": list(spacing), "hfov_deg": hfov})
+
+
+BUILDERS = {"room": build_room, "object": build_object, "forward": build_forward}
+
+
+def build_layout(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layout:
+    """Build the layout of ``recipe`` at ``scale`` from the geometry random stream ``rng``."""
+    return BUILDERS[recipe.kind](recipe, scale, rng)

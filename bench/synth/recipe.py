@@ -1,0 +1,130 @@
+"""Scene recipes: YAML files in ``configs/scenes/`` describing a procedural scene.
+
+A recipe names the scene kind, the on-disk format to write, a seed, the geometry (room preset and
+objects, a DTU-like object, or an LLFF-like layout), the cameras, the image size and the list of
+effects to simulate. Any value may be a per-scale mapping ``{tiny: ..., small: ..., medium: ...}``;
+:func:`resolve_scale` picks the entry of the requested scale.
+
+Example (a user's own recipe with their own mesh)::
+
+    name: my_room
+    kind: room
+    format: scannet
+    preset: scannet
+    seed: 3
+    objects:
+      - {type: table}
+      - {type: chair, count: 2}
+      - {type: mesh, path: /data/my_statue.obj, size: 0.6, category: statue, thin: false}
+    effects:
+      - {name: prior_profile, profile: sim-omnidata}
+      - {name: segmentation_inconsistent}
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from bench.errors import BenchInputError
+from bench.scene import DATASET_FORMATS, SCENE_KINDS
+
+SCALES = ("tiny", "small", "medium", "large")
+
+TOP_LEVEL_KEYS = {"name", "kind", "format", "seed", "preset", "description", "room", "objects", "object", "cameras", "image", "effects", "llff"}
+OBJECT_TYPES = ("table", "chair", "lamp", "plant", "cabinet", "sofa", "shelf", "mesh")
+KIND_FORMATS = {"room": ("scannet", "replica"), "object": ("dtu",), "forward": ("llff",)}
+
+
+@dataclass
+class Recipe:
+    """A parsed, validated recipe (values may still be per-scale mappings)."""
+
+    name: str
+    kind: str
+    format: str
+    seed: int
+    raw: dict[str, Any]
+    path: Path | None = None
+    effects: list[dict[str, Any]] = field(default_factory=list)
+
+    def get(self, *keys: str, default: Any = None, scale: str = "small") -> Any:
+        """Nested lookup (``recipe.get("cameras", "views", scale="tiny")``) with per-scale resolution."""
+        node: Any = self.raw
+        for k in keys:
+            if not isinstance(node, dict) or k not in node:
+                return default
+            node = node[k]
+        return resolve_scale(node, scale, self.where(*keys))
+
+    def where(self, *keys: str) -> str:
+        base = str(self.path) if self.path else self.name
+        return f"{base} [{'.'.join(keys)}]" if keys else base
+
+
+def resolve_scale(value: Any, scale: str, where: str) -> Any:
+    """Return ``value[scale]`` if ``value`` is a per-scale mapping, else ``value`` unchanged."""
+    if isinstance(value, dict) and value and set(value) <= set(SCALES):
+        if scale not in value:
+            raise BenchInputError(where, f"no value for scale {scale!r} (has {sorted(value)})")
+        return value[scale]
+    return value
+
+
+def parse_recipe(data: Any, where: str | Path, path: Path | None = None) -> Recipe:
+    """Validate a recipe mapping; raise BenchInputError naming ``where`` and the problem."""
+    if data is None or (isinstance(data, dict) and not data):
+        raise BenchInputError(where, "recipe is empty")
+    if not isinstance(data, dict):
+        raise BenchInputError(where, f"recipe must be a mapping, got {type(data).__name__}")
+    unknown = set(data) - TOP_LEVEL_KEYS
+    if unknown:
+        raise BenchInputError(where, f"unknown recipe keys {sorted(unknown)}; known: {sorted(TOP_LEVEL_KEYS)}")
+    for key in ("name", "kind", "format"):
+        if key not in data:
+            raise BenchInputError(where, f"missing required key {key!r}")
+    kind, fmt = data["kind"], data["format"]
+    if kind not in SCENE_KINDS:
+        raise BenchInputError(where, f"kind must be one of {SCENE_KINDS}, got {kind!r}")
+    if fmt not in DATASET_FORMATS:
+        raise BenchInputError(where, f"format must be one of {DATASET_FORMATS}, got {fmt!r}")
+    if fmt not in KIND_FORMATS[kind]:
+        raise BenchInputError(where, f"a {kind!r} scene is written as {KIND_FORMATS[kind]}, not {fmt!r}")
+    seed = data.get("seed", 0)
+    if not isinstance(seed, int) or seed < 0:
+        raise BenchInputError(where, f"seed must be a non-negative integer, got {seed!r}")
+    effects = data.get("effects", []) or []
+    if not isinstance(effects, list) or not all(isinstance(e, dict) and "name" in e for e in effects):
+        raise BenchInputError(where, "effects must be a list of mappings, each with a 'name'")
+    objects = data.get("objects", []) or []
+    if not isinstance(objects, list):
+        raise BenchInputError(where, "objects must be a list")
+    for i, obj in enumerate(objects + ([data["object"]] if "object" in data else [])):
+        if not isinstance(obj, dict) or obj.get("type") not in OBJECT_TYPES:
+            raise BenchInputError(where, f"object {i}: type must be one of {OBJECT_TYPES}, got {obj!r}")
+        if obj["type"] == "mesh" and "path" not in obj:
+            raise BenchInputError(where, f"object {i}: a 'mesh' object needs a 'path'")
+    return Recipe(name=str(data["name"]), kind=kind, format=fmt, seed=seed, raw=data, path=path, effects=effects)
+
+
+def load_recipe(path: str | Path) -> Recipe:
+    """Read and validate a recipe YAML file."""
+    path = Path(path)
+    if not path.exists():
+        raise BenchInputError(path, "recipe file does not exist")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise BenchInputError(path, f"not valid YAML ({exc})") from exc
+    return parse_recipe(data, path, path=path)
+
+
+def resolve_mesh_path(recipe: Recipe, path: str) -> Path:
+    """Mesh paths in a recipe are relative to the recipe file's folder (or absolute)."""
+    p = Path(path).expanduser()
+    if not p.is_absolute() and recipe.path is not None:
+        p = (recipe.path.parent / p).resolve()
+    return p

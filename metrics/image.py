@@ -1,0 +1,135 @@
+"""Image metrics for the few-shot novel-view table (Table 3): PSNR and SSIM through kornia.
+
+As FSGS / RegNeRF evaluate saved PNGs, both images are first quantised to 8 bits:
+``q(x) = round(clip(x, 0, 1) * 255) / 255``.
+
+* PSNR (dB) per image: ``10 log10(1 / MSE)`` over all pixels and channels (``kornia.metrics.psnr``,
+  max value 1). Identical images give MSE = 0 and an infinite PSNR: it is capped at ``max_db``
+  (default 100 dB). Any image pair that is not identical after quantisation but would exceed the cap
+  (a single 8-bit step on one channel of a >= 200k-pixel image) is capped too: 100 dB reads as
+  "identical up to 8-bit rounding". Real reconstructions score 10-40 dB, so the cap never binds there.
+* SSIM per image: ``kornia.metrics.ssim`` with an 11 x 11 Gaussian window, sigma 1.5, C1 = (0.01)^2,
+  C2 = (0.03)^2, 'valid' padding (the map is averaged only where the window fits, which is what
+  scikit-image's ``structural_similarity(gaussian_weights=True, sigma=1.5, use_sample_covariance=False,
+  data_range=1)`` does by cropping the border); mean over pixels and channels.
+  Constant images are fine (C1, C2 regularise): two equal constants give SSIM = 1.
+
+Both return :class:`ImageScores` (per-image values and their mean).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+
+from metrics._checks import check_int, check_positive
+
+
+@dataclass(frozen=True)
+class ImageScores:
+    """Per-image values (N,) float64 and their mean."""
+
+    per_image: np.ndarray
+    mean: float
+
+
+def quantize_8bit(images: torch.Tensor) -> torch.Tensor:
+    """``round(clip(x, 0, 1) * 255) / 255`` (same shape and dtype)."""
+    return torch.round(images.clamp(0.0, 1.0) * 255.0) / 255.0
+
+
+def _as_batch(x: Any, name: str) -> torch.Tensor:
+    """(H, W, 3) or (N, H, W, 3) float in [0, 1] -> (N, 3, H, W) float64 tensor."""
+    if isinstance(x, np.ndarray):
+        t = torch.from_numpy(np.ascontiguousarray(x))
+    elif isinstance(x, torch.Tensor):
+        t = x.detach().cpu()
+    else:
+        raise TypeError(f"{name} must be a numpy.ndarray or torch.Tensor, got {type(x).__name__}")
+    if not torch.is_floating_point(t):
+        raise TypeError(f"{name} must be float in [0, 1], got dtype {t.dtype}")
+    if t.ndim == 3:
+        t = t[None]
+    if t.ndim != 4 or t.shape[-1] != 3 or t.shape[0] == 0:
+        raise ValueError(f"{name} must have shape (H, W, 3) or (N, H, W, 3) with N >= 1, got {tuple(x.shape)}")
+    if not torch.isfinite(t).all():
+        raise ValueError(f"{name} contains NaN or inf")
+    return t.permute(0, 3, 1, 2).to(torch.float64)
+
+
+def _pair(pred: Any, target: Any) -> tuple[torch.Tensor, torch.Tensor]:
+    p = _as_batch(pred, "pred")
+    t = _as_batch(target, "target")
+    if p.shape != t.shape:
+        raise ValueError(f"pred and target shapes differ: {tuple(p.shape)} vs {tuple(t.shape)} (N, 3, H, W)")
+    return p, t
+
+
+def psnr(pred: Any, target: Any, quantize: bool = True, max_db: float = 100.0) -> ImageScores:
+    """Peak signal-to-noise ratio per image, in dB (max value 1, on 8-bit-quantised images).
+
+    .. math:: \\text{PSNR} = \\min(10 \\log_{10}(1 / \\text{MSE}), \\text{max\\_db})
+
+    Args:
+        pred: (N, H, W, 3) or (H, W, 3) float RGB in [0, 1] (numpy or torch).
+        target: same shape.
+        quantize: quantise both to 8 bits first (default, as the few-shot papers).
+        max_db: cap for identical images (MSE = 0), dB.
+
+    Returns:
+        :class:`ImageScores` (per-image PSNR (N,), mean of the capped values).
+
+    Example:
+        >>> a = np.zeros((4, 4, 3)); b = a.copy(); b[0, 0, 0] = 1.0
+        >>> round(psnr(b, a).mean, 3)  # MSE = 1 / 48
+        16.812
+    """
+    p, t = _pair(pred, target)
+    cap = check_positive(max_db, "max_db")
+    if quantize:
+        p, t = quantize_8bit(p), quantize_8bit(t)
+    import kornia
+
+    vals = []
+    for i in range(p.shape[0]):
+        if torch.equal(p[i], t[i]):
+            vals.append(cap)
+        else:
+            vals.append(min(float(kornia.metrics.psnr(p[i], t[i], max_val=1.0)), cap))
+    arr = np.asarray(vals, dtype=np.float64)
+    return ImageScores(per_image=arr, mean=float(arr.mean()))
+
+
+def ssim(
+    pred: Any, target: Any, quantize: bool = True, window_size: int = 11, sigma: float = 1.5
+) -> ImageScores:
+    """Structural similarity per image (Gaussian 11 x 11 window, sigma 1.5, 'valid' region).
+
+    Args:
+        pred: (N, H, W, 3) or (H, W, 3) float RGB in [0, 1]; H, W >= ``window_size``.
+        target: same shape.
+        quantize: quantise both to 8 bits first (default).
+        window_size: odd Gaussian window size (11).
+        sigma: Gaussian sigma in pixels (1.5; kornia's ssim fixes 1.5, so only 1.5 is accepted).
+
+    Returns:
+        :class:`ImageScores` (per-image SSIM in [-1, 1], mean).
+    """
+    p, t = _pair(pred, target)
+    ws = check_int(window_size, "window_size", 3)
+    if ws % 2 == 0:
+        raise ValueError(f"window_size must be odd, got {ws}")
+    if float(sigma) != 1.5:
+        raise ValueError(f"sigma must be 1.5 (kornia.metrics.ssim uses a fixed sigma), got {sigma}")
+    if p.shape[-1] < ws or p.shape[-2] < ws:
+        raise ValueError(f"images must be at least {ws} x {ws} pixels, got {tuple(p.shape[-2:])}")
+    if quantize:
+        p, t = quantize_8bit(p), quantize_8bit(t)
+    import kornia
+
+    smap = kornia.metrics.ssim(p, t, window_size=ws, max_val=1.0, padding="valid")  # [N, 3, h, w]
+    arr = smap.mean(dim=(1, 2, 3)).numpy().astype(np.float64)
+    return ImageScores(per_image=arr, mean=float(arr.mean()))

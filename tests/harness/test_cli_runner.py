@@ -1,0 +1,117 @@
+"""End to end: CLI, job runner (hash, atomic JSON, skip finished, failed rows), oracle row."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from bench.cli import main
+from bench.runner import Job, job_id_for, resolve_jobs, run_jobs
+from bench.tables import JobPlan, load_table_spec, plan_jobs
+from methods.registry import available_methods, method_config
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    """`bench run --table ablation --scale tiny` once for the module (oracle row only until methods land)."""
+    out = tmp_path_factory.mktemp("runs")
+    code = main(["run", "--table", "ablation", "--scale", "tiny", "--out", str(out), "--quiet"])
+    return code, out / "tiny"
+
+
+def test_run_ablation_tiny_writes_table_with_oracle_row(tiny_run, capsys):
+    code, out = tiny_run
+    assert code == 0
+    md = (out / "ablation.md").read_text()
+    assert "Oracle" in md and "paper" in md.lower()
+    for name in ("ablation.csv", "ablation_time.csv", "ablation_accuracy_vs_time.png"):
+        assert (out / name).stat().st_size > 0
+    rows = [json.loads(p.read_text()) for p in (out / "jobs").glob("*.json")]
+    oracle = [r for r in rows if r["method"] == "oracle_tsdf"]
+    assert oracle and all(r["status"] == "ok" for r in oracle), [r.get("error") for r in oracle]
+    m = oracle[0]["metrics"]
+    assert m["fscore"] >= 0.95, m  # acceptance: the oracle is an upper bound
+    assert m["acc"] < 0.02 and m["comp"] < 0.03
+    assert set(oracle[0]["timings"]) >= {"data", "train", "eval", "total"}
+    assert [c["fraction"] for c in oracle[0]["curve"]] == [0.25, 0.5, 1.0]
+
+
+def test_rerun_skips_finished_jobs(tiny_run):
+    _, out = tiny_run
+    files = {p: p.stat().st_mtime_ns for p in (out / "jobs").glob("*.json")}
+    assert main(["run", "--table", "ablation", "--scale", "tiny", "--out", str(out.parent), "--quiet"]) == 0
+    assert {p: p.stat().st_mtime_ns for p in (out / "jobs").glob("*.json")} == files
+    assert not [p for p in out.rglob("*.tmp")]
+
+
+def test_report_command_assembles_markdown(tiny_run):
+    _, out = tiny_run
+    assert main(["report", "--table", "ablation", "--scale", "tiny", "--out", str(out.parent)]) == 0
+    assert "Table 4" in (out / "report.md").read_text()
+
+
+def test_job_id_depends_on_config_seed_and_scene():
+    spec = load_table_spec(REPO / "configs" / "tables" / "ablation.yaml")
+    plan = [p for p in plan_jobs(spec, "tiny") if p.method == "oracle_tsdf"][0]
+    cfg = method_config("oracle_tsdf", "tiny")
+    a = job_id_for(plan, cfg)
+    assert a == job_id_for(plan, dict(cfg))
+    assert a != job_id_for(plan, {**cfg, "voxel_size": 0.05})
+    from dataclasses import replace
+
+    assert a != job_id_for(replace(plan, seed=plan.seed + 1), cfg)
+    assert a != job_id_for(replace(plan, scene="scannet_like_0"), cfg)
+
+
+def test_failed_job_is_recorded_not_dropped(tmp_path):
+    plan = JobPlan("t", "oracle", "oracle_tsdf", {}, "scannet", "scannet", "scannet", "scannet_like_tiny", 0, "tiny")
+    cfg = {**method_config("oracle_tsdf", "tiny"), "voxel_size": "not-a-number"}
+    rows = run_jobs([Job(plan, cfg, "deadbeefdeadbeef")], tmp_path, show_progress=False)
+    assert rows[0]["status"] == "failed"
+    assert rows[0]["error"]["type"] == "ValueError" and "Traceback" in rows[0]["error"]["traceback"]
+    assert json.loads((tmp_path / "jobs" / "deadbeefdeadbeef.json").read_text())["status"] == "failed"
+
+
+def test_pending_methods_are_reported_not_run():
+    spec = load_table_spec(REPO / "configs" / "tables" / "ablation.yaml")
+    jobs, pending = resolve_jobs(plan_jobs(spec, "tiny"))
+    assert all(j.plan.method in available_methods() for j in jobs)
+    assert all(p.method not in available_methods() for p in pending)
+
+
+def test_unknown_override_key_is_an_error():
+    from bench.errors import BenchInputError
+
+    with pytest.raises(BenchInputError, match="voxel_sise"):
+        method_config("oracle_tsdf", "tiny", {"voxel_sise": 0.1})
+
+
+def test_cli_bad_input_prints_one_line_and_exits_2(tmp_path, capsys):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: x\nkind: room\nformat: scannet\neffects: [{name: warp_drive}]\n")
+    assert main(["scenes", "make", str(bad), "--out", str(tmp_path / "o"), "--scale", "tiny"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "warp_drive" in err[0] and "bad.yaml" in err[0]
+    assert not (tmp_path / "o").exists()
+    assert main(["run", "--table", "no_such_table", "--scale", "tiny", "--out", str(tmp_path)]) == 2
+    assert "no_such_table" in capsys.readouterr().err
+
+
+def test_cli_list(capsys):
+    assert main(["list"]) == 0
+    out = capsys.readouterr().out
+    assert "oracle_tsdf" in out and "ablation" in out and "scannet_like_0" in out
+
+
+def test_cli_scenes_make_then_load(tmp_path, capsys):
+    from bench.formats import load_scene
+
+    assert main(["scenes", "make", "dtu_like_0", "--out", str(tmp_path / "dtu"), "--scale", "tiny"]) == 0
+    scene = load_scene(tmp_path / "dtu")
+    assert scene.source_format == "dtu" and len(scene.view_indices("train")) == 3
+    # the output exists now: making it again without --overwrite is a clear error
+    assert main(["scenes", "make", "dtu_like_0", "--out", str(tmp_path / "dtu"), "--scale", "tiny"]) == 2

@@ -1,0 +1,243 @@
+"""Aggregation, rendering and the claims check (bench/report.py) on synthetic result JSONs."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+
+from bench.errors import BenchInputError
+from bench.report import build_table, collect_results, render_report, to_markdown, write_table_outputs
+from bench.tables import TableSpec, load_table_spec
+
+SPEC: dict[str, Any] = {
+    "name": "abl",
+    "title": "Ablation test table",
+    "paper_table": "Table 4",
+    "datasets": [{
+        "dataset": "scannet", "protocol": "scannet", "scenes": {"small": ["s0", "s1"]},
+        "columns": [
+            {"key": "acc", "label": "Acc", "direction": "lower", "unit": "m"},
+            {"key": "fscore", "label": "F-score", "direction": "higher"},
+        ],
+    }],
+    "seeds": {"small": [0, 1, 2]},
+    "rows": [
+        {"label": "Base", "method": "mi", "overrides": {"u": False}, "paper": {"scannet": {"acc": 0.039, "fscore": 0.749}}},
+        {"label": "Full", "method": "mi", "overrides": {"u": True}, "paper": {"scannet": {"acc": 0.035, "fscore": 0.834}}},
+        {"label": "Future", "method": "not_yet"},
+        {"label": "Later", "method": "mi"},
+    ],
+    "paper_only_rows": [{"label": "MonoSDF", "paper": {"scannet": {"acc": 0.035, "fscore": 0.733}}}],
+    "claims": [
+        {"id": "rises", "text": "F rises", "kind": "monotone", "group": "scannet", "metric": "fscore",
+         "rows": ["Base", "Full"], "direction": "increasing"},
+        {"id": "falls", "text": "F falls", "kind": "monotone", "group": "scannet", "metric": "fscore",
+         "rows": ["Base", "Full"], "direction": "decreasing"},
+        {"id": "acc", "text": "Full more accurate", "kind": "better", "group": "scannet", "metric": "acc",
+         "row_a": "Full", "row_b": "Base"},
+        {"id": "later", "text": "Later beats Base", "kind": "better", "group": "scannet", "metric": "fscore",
+         "row_a": "Later", "row_b": "Base"},
+    ],
+}
+FSCORE = {"Base": 0.70, "Full": 0.80}
+
+
+def job(row: str, scene: str, seed: int, status: str = "ok", **metrics: float) -> dict[str, Any]:
+    f = FSCORE[row] + 0.01 * seed + (0.002 if scene == "s1" else 0.0)
+    return {
+        "job_id": f"{row}-{scene}-{seed}", "schema": 1, "table": "abl", "row": row, "method": "mi",
+        "config": {}, "scene": scene, "dataset": "scannet", "seed": seed, "scale": "small", "status": status,
+        "error": None if status == "ok" else {"type": "RuntimeError", "message": "loss is NaN", "traceback": "tb"},
+        "metrics": {} if status != "ok" else {"fscore": f, "acc": 0.04, **metrics},
+        "timings": {"data": 1.0, "train": 10.0 + seed, "total": 12.0 + seed} if status == "ok" else {"data": 1.0},
+        "iterations": 100,
+        "curve": [{"fraction": 0.5, "iterations": 50, "seconds": 6.0, "metrics": {"fscore": f / 2}}],
+        "versions": {"bench": "0.1.0"}, "worker": "h:1", "created": f"2026-11-22T00:00:0{seed}",
+    }
+
+
+def write_jobs(results: Path, jobs: list[dict[str, Any]]) -> None:
+    (results / "jobs").mkdir(parents=True, exist_ok=True)
+    for j in jobs:
+        (results / "jobs" / f"{j['job_id']}.json").write_text(json.dumps(j))
+
+
+@pytest.fixture
+def spec(tmp_path: Path) -> TableSpec:
+    p = tmp_path / "abl.yaml"
+    p.write_text(yaml.safe_dump(SPEC, sort_keys=False))
+    return load_table_spec(p)
+
+
+@pytest.fixture
+def results(tmp_path: Path) -> Path:
+    jobs = [job(r, s, seed) for r in ("Base", "Full") for s in ("s0", "s1") for seed in (0, 1, 2)]
+    jobs = [j for j in jobs if not (j["row"] == "Base" and j["scene"] == "s1" and j["seed"] == 2)]
+    jobs.append(job("Base", "s1", 2, status="failed"))
+    write_jobs(tmp_path / "res", jobs)
+    return tmp_path / "res"
+
+
+def test_collect_results(results: Path) -> None:
+    df = collect_results(results)
+    assert len(df) == 12 and set(df["status"]) == {"ok", "failed"}
+    assert collect_results(results / "nowhere").empty
+
+
+def test_corrupt_json_names_the_file(tmp_path: Path) -> None:
+    (tmp_path / "jobs").mkdir()
+    bad = tmp_path / "jobs" / "x.json"
+    bad.write_text("{not json")
+    with pytest.raises(BenchInputError, match="corrupt result JSON") as e:
+        collect_results(tmp_path)
+    assert e.value.where == str(bad)
+    bad.write_text(json.dumps({"job_id": "x"}))
+    with pytest.raises(BenchInputError, match=r"missing key\(s\)"):
+        collect_results(tmp_path)
+
+
+def test_mean_std_and_marks(spec: TableSpec, results: Path) -> None:
+    rep = build_table(spec, collect_results(results), "small", available_methods={"mi"})
+    full = rep.cells[("Full", "scannet", "fscore")]
+    per_seed = [0.801, 0.811, 0.821]  # mean over the two scenes per seed
+    assert full.mean == pytest.approx(np.mean(per_seed))
+    assert full.std == pytest.approx(np.std(per_seed, ddof=1))
+    assert (full.n, full.n_expected, full.n_failed, full.status) == (6, 6, 0, "complete")
+    base = rep.cells[("Base", "scannet", "fscore")]
+    assert (base.n, base.n_failed, base.status) == (5, 1, "partial")
+    assert rep.cells[("Future", "scannet", "fscore")].status == "not_implemented"
+    assert rep.cells[("Later", "scannet", "fscore")].status == "pending"
+    md = to_markdown(rep)
+    assert "(5/6, 1 failed)" in md
+    assert "pending (method not implemented yet)" in md
+    assert "| **Later**" in md and "pending" in md
+    assert "*paper: MonoSDF*" in md and "↳ *paper: Full*" in md and "0.834" in md
+    assert "Stage timings" in md and "loss is NaN" in md
+
+
+def test_superseded_results_use_the_latest(spec: TableSpec, results: Path) -> None:
+    newer = job("Base", "s1", 2)
+    newer["job_id"] = "rerun"
+    newer["created"] = "2026-11-23T00:00:00"
+    write_jobs(results, [newer])
+    rep = build_table(spec, collect_results(results), "small")
+    assert rep.cells[("Base", "scannet", "fscore")].status == "complete"
+    assert rep.n_superseded == 1
+
+
+def claim(rep: Any, cid: str) -> Any:
+    return next(c for c in rep.claims if c.claim.id == cid)
+
+
+def test_claims(spec: TableSpec, results: Path) -> None:
+    rep = build_table(spec, collect_results(results), "small", available_methods={"mi"})
+    assert claim(rep, "rises").verdict == "HELD"
+    assert claim(rep, "rises").partial  # Base has a failed job
+    assert "exceeds the combined spread" in claim(rep, "rises").details[0]
+    assert "3 seeds" in claim(rep, "rises").details[0]
+    assert claim(rep, "rises").paper_verdict == "HELD"
+    assert claim(rep, "falls").verdict == "NOT HELD"
+    assert claim(rep, "falls").paper_verdict == "NOT HELD"
+    assert claim(rep, "acc").verdict == "NOT HELD"  # equal acc: a strict claim does not hold on a tie
+    assert claim(rep, "later").verdict.startswith("UNDECIDED (missing rows")
+    md = to_markdown(rep)
+    assert "**HELD**" in md and "**NOT HELD**" in md and "**UNDECIDED" in md
+
+
+def test_greater_claim_on_extra_metrics(tmp_path: Path) -> None:
+    obj = json.loads(json.dumps(SPEC))
+    obj["datasets"][0]["extra_metrics"] = ["unc_thin", "unc_plane"]
+    obj["claims"] = [{"id": "g", "text": "thin > plane", "kind": "greater", "group": "scannet", "row": "Full",
+                      "metric_a": "unc_thin", "metric_b": "unc_plane"}]
+    p = tmp_path / "abl.yaml"
+    p.write_text(yaml.safe_dump(obj))
+    spec = load_table_spec(p)
+    write_jobs(tmp_path / "r", [job("Full", s, seed, unc_thin=0.6, unc_plane=0.1) for s in ("s0", "s1") for seed in (0, 1, 2)])
+    rep = build_table(spec, collect_results(tmp_path / "r"), "small")
+    assert rep.claims[0].verdict == "HELD" and not rep.claims[0].partial
+
+
+def test_outputs_written_atomically(spec: TableSpec, results: Path, tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    rep = build_table(spec, collect_results(results), "small", available_methods={"mi"})
+    paths = write_table_outputs(rep, out)
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        ["abl.csv", "abl.md", "abl_time.csv", "abl_accuracy_vs_time.png"])  # no temp files left
+    assert paths["png"].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    tidy = pd.read_csv(paths["csv"])
+    assert list(tidy.columns[:6]) == ["table", "row", "group", "dataset", "metric", "source"]
+    ours = tidy[(tidy["row"] == "Full") & (tidy["metric"] == "fscore") & (tidy["source"] == "ours")].iloc[0]
+    assert ours["mean"] == pytest.approx(rep.cells[("Full", "scannet", "fscore")].mean)
+    assert ours["n"] == 6 and ours["n_failed"] == 0
+    paper = tidy[(tidy["row"] == "MonoSDF") & (tidy["source"] == "paper") & (tidy["metric"] == "fscore")]
+    assert paper["mean"].tolist() == [0.733]
+    base = tidy[(tidy["row"] == "Base") & (tidy["metric"] == "fscore") & (tidy["source"] == "ours")].iloc[0]
+    assert (base["n"], base["n_failed"], base["status"]) == (5, 1, "partial")
+    time = pd.read_csv(paths["time_csv"])
+    total = time[(time["row"] == "Full") & (time["quantity"] == "total")]["mean"].iloc[0]
+    assert total == pytest.approx(13.0)
+    assert {"data", "train", "total", "iterations"} <= set(time["quantity"])
+    assert "| **Full**" in paths["md"].read_text()
+
+
+def test_render_report_and_empty_results(spec: TableSpec, tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    path = render_report([spec], collect_results(tmp_path / "empty"), "small", out)
+    text = path.read_text()
+    assert "# MonoInstance benchmark report" in text and "Ablation test table" in text
+    assert "0 ok, 0 failed, 24 pending of 24 expected jobs" in text
+    assert (out / "abl_accuracy_vs_time.png").exists()
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]
+    with pytest.raises(BenchInputError, match="no scale 'tiny'"):
+        render_report([spec], collect_results(tmp_path / "empty"), "tiny", out)
+
+
+def test_groups_sharing_a_dataset_split_by_overrides(tmp_path: Path) -> None:
+    obj = json.loads(json.dumps(SPEC))
+    g = obj["datasets"][0]
+    obj["datasets"] = [{**g, "id": "p1", "overrides": {"prior_profile": "a"}},
+                       {**g, "id": "p2", "overrides": {"prior_profile": "b"}}]
+    obj["rows"] = [{"label": "Full", "method": "mi"}]
+    obj["paper_only_rows"], obj["claims"] = [], []
+    p = tmp_path / "abl.yaml"
+    p.write_text(yaml.safe_dump(obj))
+    spec = load_table_spec(p)
+    jobs = []
+    for prof, bump in (("a", 0.0), ("b", 0.1)):
+        for s in ("s0", "s1"):
+            for seed in (0, 1, 2):
+                j = job("Full", s, seed)
+                j["job_id"] += prof
+                j["config"] = {"prior_profile": prof}
+                j["metrics"]["fscore"] += bump
+                jobs.append(j)
+    write_jobs(tmp_path / "r", jobs)
+    rep = build_table(spec, collect_results(tmp_path / "r"), "small")
+    a, b = rep.cells[("Full", "p1", "fscore")], rep.cells[("Full", "p2", "fscore")]
+    assert a.n == b.n == 6 and b.mean - a.mean == pytest.approx(0.1)
+    assert math.isfinite(a.std)
+
+
+def test_shipped_specs_render_without_results(tmp_path: Path) -> None:
+    configs = Path(__file__).resolve().parents[2] / "configs" / "tables"
+    specs = [load_table_spec(p) for p in sorted(configs.glob("*.yaml"))]
+    path = render_report(specs, collect_results(tmp_path), "tiny", tmp_path / "out", available_methods={"oracle_tsdf"})
+    text = path.read_text()
+    assert "pending (method not implemented yet)" in text and "UNDECIDED" in text
+
+
+def test_paper_unit_is_shown_and_kept_in_csv(tmp_path: Path) -> None:
+    dtu = load_table_spec(Path(__file__).resolve().parents[2] / "configs" / "tables" / "dtu.yaml")
+    rep = build_table(dtu, collect_results(tmp_path), "tiny")
+    md = to_markdown(rep)
+    assert "CD ↓ [m; paper: mm]" in md and "| 1.18 " in md
+    paper = rep.tidy[rep.tidy["source"] == "paper"]
+    assert set(paper["unit"]) == {"mm"}
+    assert set(rep.tidy[rep.tidy["source"] == "ours"]["unit"]) == {"m"}

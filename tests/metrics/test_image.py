@@ -1,0 +1,68 @@
+import numpy as np
+import pytest
+import torch
+from skimage.metrics import peak_signal_noise_ratio, structural_similarity
+
+from metrics.image import psnr, quantize_8bit, ssim
+
+
+def pair(seed=0, n=3, h=40, w=52):
+    rng = np.random.default_rng(seed)
+    a = rng.random((n, h, w, 3))
+    b = np.clip(a + rng.normal(0, 0.08, a.shape), 0, 1)
+    q = lambda x: np.round(np.clip(x, 0, 1) * 255) / 255
+    return a, b, q(a), q(b)
+
+
+def test_against_scikit_image():
+    a, b, qa, qb = pair()
+    ps, ss = psnr(b, a), ssim(b, a)
+    for i in range(a.shape[0]):
+        ref_p = peak_signal_noise_ratio(qa[i], qb[i], data_range=1.0)
+        ref_s = structural_similarity(qa[i], qb[i], data_range=1.0, channel_axis=-1, gaussian_weights=True, sigma=1.5, use_sample_covariance=False)
+        assert ps.per_image[i] == pytest.approx(ref_p, abs=1e-4)
+        assert ss.per_image[i] == pytest.approx(ref_s, abs=1e-4)
+    assert ps.mean == pytest.approx(ps.per_image.mean()) and ss.mean == pytest.approx(ss.per_image.mean())
+
+
+def test_quantisation_is_applied():
+    a = np.full((16, 16, 3), 0.5)
+    b = a + 0.001  # same 8-bit value (127.5 -> 128, 127.755 -> 128)
+    assert psnr(b, a).mean == 100.0
+    assert psnr(b, a, quantize=False).mean == pytest.approx(60.0)
+    x = torch.tensor([-0.2, 0.0, 0.5, 1.3])
+    assert torch.equal(quantize_8bit(x), torch.tensor([0.0, 0.0, 128 / 255, 1.0]))
+
+
+def test_identical_and_constant_images():
+    a, _, _, _ = pair(1, n=2)
+    assert psnr(a, a).per_image.tolist() == [100.0, 100.0]
+    assert psnr(a, a, max_db=80.0).mean == 80.0
+    assert ssim(a, a).mean == pytest.approx(1.0)
+    c0, c1 = np.full((20, 20, 3), 0.2), np.full((20, 20, 3), 0.6)
+    assert ssim(c0, c0).mean == pytest.approx(1.0)
+    s = ssim(c0, c1).mean
+    assert np.isfinite(s) and 0 < s < 1
+    mse = (np.round(0.6 * 255) / 255 - np.round(0.2 * 255) / 255) ** 2
+    assert psnr(c0, c1).mean == pytest.approx(-10 * np.log10(mse))
+
+
+def test_single_image_torch_float32():
+    a, b, _, _ = pair(2, n=1)
+    r64 = ssim(b[0], a[0]).mean
+    r32 = ssim(torch.from_numpy(b[0]).float(), torch.from_numpy(a[0]).float()).mean
+    assert r32 == pytest.approx(r64, abs=1e-6)
+
+
+def test_errors():
+    a = np.zeros((8, 8, 3))
+    with pytest.raises(ValueError, match="shapes differ"):
+        psnr(a, np.zeros((8, 9, 3)))
+    with pytest.raises(ValueError, match="shape"):
+        psnr(np.zeros((8, 8)), np.zeros((8, 8)))
+    with pytest.raises(TypeError):
+        psnr(np.zeros((8, 8, 3), dtype=np.uint8), a)
+    with pytest.raises(ValueError, match="at least"):
+        ssim(a, a)
+    with pytest.raises(ValueError, match="NaN"):
+        psnr(np.full((8, 8, 3), np.nan), a)

@@ -1,0 +1,48 @@
+import numpy as np
+import pytest
+import torch
+
+from metrics.nn import nearest_neighbor, nearest_neighbor_bruteforce
+
+
+@pytest.mark.parametrize("backend", ["scipy", "open3d"])
+def test_fast_matches_bruteforce(backend):
+    rng = np.random.default_rng(1)
+    q, r = rng.normal(size=(700, 3)), rng.normal(size=(900, 3))
+    d, i = nearest_neighbor(q, r, backend=backend)
+    db, ib = nearest_neighbor_bruteforce(q, r)
+    np.testing.assert_allclose(d, db, atol=1e-6, rtol=0)
+    assert (i == ib).mean() > 0.999  # ties are measure-zero for random data
+
+
+def test_bruteforce_is_correct_on_hand_case():
+    d, i = nearest_neighbor_bruteforce(np.array([[0.0, 0, 0], [5, 0, 0]]), np.array([[1.0, 0, 0], [0, 3, 0], [4, 0, 1]]))
+    np.testing.assert_allclose(d, [1.0, np.sqrt(2)])
+    assert i.tolist() == [0, 2]
+
+
+def test_torch_and_float32_inputs():
+    rng = np.random.default_rng(2)
+    q, r = rng.random((50, 3)), rng.random((60, 3))
+    d64, _ = nearest_neighbor(q, r)
+    d32, _ = nearest_neighbor(torch.from_numpy(q.astype(np.float32)), r.astype(np.float32))
+    np.testing.assert_allclose(d32, d64, atol=1e-6)
+
+
+@pytest.mark.parametrize(
+    "q, err",
+    [
+        (np.zeros((0, 3)), ValueError),
+        (np.zeros((4, 2)), ValueError),
+        (np.array([[np.nan, 0, 0]]), ValueError),
+        ([[0.0, 0, 0]], TypeError),
+    ],
+)
+def test_bad_inputs(q, err):
+    with pytest.raises(err):
+        nearest_neighbor(q, np.zeros((3, 3)))
+
+
+def test_bad_backend():
+    with pytest.raises(ValueError, match="backend"):
+        nearest_neighbor(np.zeros((1, 3)), np.zeros((1, 3)), backend="faiss")

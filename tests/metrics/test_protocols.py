@@ -1,0 +1,115 @@
+import numpy as np
+import pytest
+import trimesh
+
+from metrics.culling import (
+    crop_mesh_to_bbox,
+    cull_mesh_to_frusta,
+    cull_mesh_to_visible,
+    gt_bounding_box,
+    points_in_frusta,
+    render_depth_maps,
+    tsdf_refuse,
+)
+from metrics.dtu import DTUParams, dtu_chamfer, dtu_gt_points, radius_downsample, sample_mesh_dtu
+from metrics.protocols import evaluate_mesh_replica, evaluate_mesh_scannet
+
+
+def test_frustum_test_and_depth_rendering_are_z_depth():
+    K = np.array([[50.0, 0, 31.5], [0, 50.0, 23.5], [0, 0, 1]])
+    c2w = np.eye(4)
+    pts = np.array([[0, 0, 2.0], [0, 0, -2.0], [10, 0, 2.0], [0.6, 0.45, 1.0]])
+    assert points_in_frusta(pts, K, c2w, 48, 64).tolist() == [True, False, False, True]
+    wall = trimesh.Trimesh([[-5, -5, 3.0], [5, -5, 3], [5, 5, 3], [-5, 5, 3]], [[0, 1, 2], [0, 2, 3]], process=False)
+    d = render_depth_maps(wall, K, c2w[None], 48, 64)
+    np.testing.assert_allclose(d, 3.0, rtol=1e-6)  # a fronto-parallel plane has constant z-depth
+
+
+def test_cull_and_crop(ring_cameras):
+    K, c2w, H, W = ring_cameras
+    box = trimesh.creation.box((0.5, 0.5, 0.5))
+    far = trimesh.creation.box((0.5, 0.5, 0.5))
+    far.apply_translation([0, 0, 30.0])  # above every camera: outside all frusta
+    both = trimesh.util.concatenate([box, far])
+    culled = cull_mesh_to_frusta(both, K, c2w, H, W)
+    assert len(culled.faces) == len(box.faces) and culled.vertices[:, 2].max() < 1
+    to_box, half = gt_bounding_box(box, 1.05)
+    np.testing.assert_allclose(np.sort(half), [0.2625] * 3)
+    assert len(crop_mesh_to_bbox(both, to_box, half).faces) == len(box.faces)
+
+
+def test_visibility_culling_removes_hidden_faces(ring_cameras):
+    K, c2w, H, W = ring_cameras
+    from metrics.culling import subdivide_mesh
+
+    box = subdivide_mesh(trimesh.creation.box((0.6, 0.6, 0.6)), 0.05)
+    vis = cull_mesh_to_visible(box, K, c2w, H, W)
+    # cameras are above the box (z = 0.8 m): the bottom face (z = -0.3) is never seen; only bottom
+    # triangles near the rim survive (a pixel covers ~5 cm at 2.5 m, so vertices within a pixel of a
+    # seen side face pass the occlusion test)
+    bottom = vis.face_normals[:, 2] < -0.99
+    near_rim = (np.abs(vis.vertices[:, :2]) > 0.3 - 0.1).any(1)
+    assert near_rim[vis.faces[bottom]].any(1).all()
+    n_bottom = (box.face_normals[:, 2] < -0.99).sum()
+    assert bottom.sum() < 0.5 * n_bottom and 0 < len(vis.faces) < len(box.faces)
+
+
+def test_replica_protocol_identical_and_shifted(ring_cameras):
+    K, c2w, H, W = ring_cameras
+    gt = trimesh.creation.icosphere(4, radius=0.5)
+    same = evaluate_mesh_replica(gt, gt, K, c2w, H, W, n_samples=30_000)
+    assert same.fscore == 1.0 and same.accuracy < 8e-3 and same.normal_consistency > 0.99
+    big = trimesh.creation.icosphere(4, radius=0.53)
+    m = evaluate_mesh_replica(big, gt, K, c2w, H, W, n_samples=30_000)
+    assert m.accuracy == pytest.approx(0.03, abs=3e-3) and m.completion == pytest.approx(0.03, abs=4e-3)
+    far = trimesh.creation.icosphere(2, radius=0.5)
+    far.apply_translation([0, 0, 40.0])
+    with pytest.raises(ValueError, match="empty after culling"):
+        evaluate_mesh_replica(far, gt, K, c2w, H, W, n_samples=1000)
+
+
+def test_scannet_protocol(ring_cameras):
+    K, c2w, H, W = ring_cameras
+    gt = trimesh.creation.box((0.8, 0.8, 0.8))
+    refused = tsdf_refuse(gt, K, c2w, H, W, voxel_size=0.02, sdf_trunc=0.06)
+    assert len(refused.faces) > 0 and np.abs(refused.vertices).max() < 0.45
+    kw = dict(tsdf_voxel=0.02, tsdf_trunc=0.06)
+    same = evaluate_mesh_scannet(gt, gt, K, c2w, H, W, **kw)
+    assert same.accuracy < 1e-6 and same.fscore == 1.0 and np.isnan(same.normal_consistency)
+    moved = gt.copy()
+    moved.apply_translation([0.1, 0, 0])
+    m = evaluate_mesh_scannet(moved, gt, K, c2w, H, W, **kw)
+    assert 0.03 < m.chamfer < 0.1 and m.fscore < 1.0
+
+
+def test_dtu_sampling_downsampling_and_chamfer(ring_cameras):
+    K, c2w, H, W = ring_cameras
+    params = DTUParams.scaled(object_size=0.6, image_downscale=20)  # density ~7 mm, cut ~34 mm
+    assert params.max_dist == pytest.approx(20 * 0.6 / 350)
+    sq = trimesh.Trimesh([[0, 0, 0.0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], process=False)
+    pts = sample_mesh_dtu(sq, 0.1)
+    assert np.all(pts[:, 0] + pts[:, 1] <= 1 + 1e-12) and len(pts) == 3 + 45
+    down = radius_downsample(pts, 0.15, seed=0)
+    assert len(down) < len(pts)
+    gt = trimesh.creation.icosphere(4, radius=0.3)
+    gpts = dtu_gt_points(gt, K, c2w, H, W, params)
+    res = dtu_chamfer(gt, gpts, K, c2w, H, W, params, gt_mesh=gt)
+    assert res.chamfer < params.density and res.d2s < params.density
+    big = trimesh.creation.icosphere(4, radius=0.31)
+    r2 = dtu_chamfer(big, gpts, K, c2w, H, W, params, gt_mesh=gt)
+    assert r2.chamfer == pytest.approx(0.01, abs=params.density / 2)
+    # ground plane z > 0.1: only the cap enters s2d
+    r3 = dtu_chamfer(big, gpts, K, c2w, H, W, params, gt_mesh=gt, ground_plane=[0, 0, 1, -0.1])
+    assert r3.n_gt < res.n_gt
+    with pytest.raises(ValueError):
+        dtu_chamfer(big, gpts, K, c2w, H, W, params)  # no depth maps and no gt mesh
+    with pytest.raises(ValueError, match="max_points"):
+        sample_mesh_dtu(gt, 1e-5, max_points=1000)
+
+
+def test_real_lamp_thin_structures(real_mesh, ring_cameras):
+    K, c2w, H, W = ring_cameras
+    lamp = real_mesh("chair_model.obj")
+    lamp = trimesh.Trimesh(lamp.vertices - lamp.bounds.mean(0), lamp.faces, process=False)
+    m = evaluate_mesh_replica(lamp, lamp, K, c2w, H, W, n_samples=20_000)
+    assert m.fscore > 0.99 and m.chamfer < 0.01

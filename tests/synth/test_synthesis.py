@@ -1,0 +1,193 @@
+"""Scene synthesis: rendering conventions, recipes, determinism, bad input, atomic output."""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+import yaml
+
+from bench.errors import BenchInputError
+from bench.scene import backproject_depth
+from bench.synth import cameras as cams
+from bench.synth.geometry import SceneObject, _box
+from bench.synth.make import make_dataset, make_scene
+from bench.synth.recipe import load_recipe, parse_recipe
+from bench.synth.render import SceneRaycaster
+
+REPO = Path(__file__).resolve().parents[2]
+SCENES = REPO / "configs" / "scenes"
+MESHES = REPO.parent / "shared" / "assets" / "meshes"
+
+
+def _tree_digest(folder: Path) -> dict[str, str]:
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def _distance_to_mesh(mesh: trimesh.Trimesh, points: np.ndarray) -> np.ndarray:
+    import open3d as o3d
+
+    rs = o3d.t.geometry.RaycastingScene()
+    rs.add_triangles(o3d.core.Tensor(mesh.vertices.astype(np.float32)), o3d.core.Tensor(mesh.faces.astype(np.uint32)))
+    return rs.compute_distance(o3d.core.Tensor(points.astype(np.float32))).numpy()
+
+
+def _write_recipe(tmp_path: Path, data: dict, name: str = "r.yaml") -> Path:
+    path = tmp_path / name
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+# ----------------------------------------------------------------------------- rendering conventions
+def test_raycaster_returns_z_depth_and_camera_frame_normals():
+    """A camera looking at a wall 2 m away, slightly rotated: every pixel's z-depth of the wall plane
+    must match the analytic value, and the normal (camera frame) must face the camera."""
+    wall = SceneObject("wall", "wall", _box((20.0, 0.1, 20.0), (0.0, 2.05, 0.0)), True, False, np.array([0.5, 0.5, 0.5]))
+    rc = SceneRaycaster([wall])
+    K = cams.intrinsics(64, 48, 60.0)
+    pose = cams.look_at(np.array([0.0, 0.0, 0.0]), np.array([0.3, 2.0, 0.2]))
+    rgb, depth, normal, inst = rc.render(K, pose, 48, 64)
+    assert np.all(inst == 1) and np.all(depth > 0)
+    pts = backproject_depth(depth.astype(np.float64), K, pose)
+    np.testing.assert_allclose(pts[..., 1], 2.0, atol=1e-4)  # every back-projected point lies on the wall plane y = 2
+    n_world = normal.reshape(-1, 3) @ pose[:3, :3].T
+    np.testing.assert_allclose(n_world, np.tile([0.0, -1.0, 0.0], (48 * 64, 1)), atol=1e-5)
+    assert np.all((rgb >= 0) & (rgb <= 1))
+
+
+def test_look_at_is_opencv():
+    pose = cams.look_at(np.array([0.0, 0.0, 1.0]), np.array([0.0, 5.0, 1.0]))
+    np.testing.assert_allclose(pose[:3, 2], [0, 1, 0], atol=1e-12)  # forward = +z camera
+    np.testing.assert_allclose(pose[:3, 1], [0, 0, -1], atol=1e-12)  # image down = world down
+    np.testing.assert_allclose(pose[:3, 0], [1, 0, 0], atol=1e-12)  # right
+    assert np.isclose(np.linalg.det(pose[:3, :3]), 1.0)
+
+
+# ----------------------------------------------------------------------------- recipes
+@pytest.mark.parametrize("name", ["scannet_like_tiny", "replica_like_0", "dtu_like_0", "llff_like_0"])
+def test_shipped_recipes_render_sensible_scenes(name):
+    scene, mesh = make_scene(load_recipe(SCENES / f"{name}.yaml"), scale="tiny")
+    scene.validate()
+    assert scene.num_views >= 3
+    assert len(mesh.faces) > 0
+    hit = scene.gt_depth > 0
+    assert hit.mean() > 0.8
+    # GT depth back-projects onto the GT mesh (z-depth convention end to end)
+    v = 0
+    pts = backproject_depth(scene.gt_depth[v].astype(np.float64), scene.intrinsics[v], scene.cam_to_world[v])[hit[v]]
+    sub = pts[:: max(1, len(pts) // 500)]
+    dist = _distance_to_mesh(mesh, sub)
+    assert np.percentile(dist, 99) < 5e-3
+    # instance table: background flags on walls/floor, thin flags on furniture with legs/poles/stems
+    cats = {i.category: i for i in scene.instances.values()}
+    if scene.kind == "room":
+        assert cats["wall"].is_background and cats["floor"].is_background
+        assert any(i.is_thin for i in scene.instances.values() if not i.is_background)
+    for v in range(scene.num_views):
+        assert set(np.unique(scene.gt_instance[v])) - {0} <= set(scene.instances)
+
+
+def test_room_cameras_are_outside_furniture():
+    scene, mesh = make_scene(load_recipe(SCENES / "scannet_like_0.yaml"), scale="small")
+    assert scene.num_views == 48 and (scene.width, scene.height) == (128, 96)
+    assert scene.gt_depth[scene.gt_depth > 0].min() > 0.3  # nothing right in front of the lens
+    assert not scene.metadata["layout"]["objects_not_placed"]
+
+
+def test_no_prior_error_effects_give_exact_priors(tmp_path):
+    path = _write_recipe(tmp_path, {"name": "exact", "kind": "room", "format": "scannet", "preset": "scannet", "seed": 3,
+                                    "objects": [{"type": "table"}, {"type": "lamp"}], "effects": [{"name": "sensor_noise"}]})
+    scene, _ = make_scene(load_recipe(path), scale="tiny")
+    np.testing.assert_array_equal(scene.mono_depth, scene.gt_depth)
+    np.testing.assert_array_equal(scene.mono_normal, scene.gt_normal)
+
+
+def test_effects_are_recorded_in_metadata():
+    scene, _ = make_scene(load_recipe(SCENES / "scannet_like_tiny.yaml"), scale="tiny")
+    names = [r["name"] for r in scene.metadata["effects"]]
+    assert "prior_profile" in names and "segmentation_inconsistent" in names
+    assert not np.array_equal(scene.mono_depth, scene.gt_depth)
+
+
+def test_user_mesh_object(tmp_path):
+    mesh_path = tmp_path / "thing.obj"
+    trimesh.creation.torus(0.3, 0.05).export(mesh_path)
+    path = _write_recipe(tmp_path, {"name": "user", "kind": "object", "format": "dtu", "seed": 1,
+                                    "object": {"type": "mesh", "path": "thing.obj", "size": 0.4, "category": "torus"}})
+    scene, mesh = make_scene(load_recipe(path), scale="tiny")
+    assert any(i.category == "torus" for i in scene.instances.values())
+    assert len(scene.view_indices("train")) == 3 and len(scene.view_indices("eval_only")) > 0
+
+
+@pytest.mark.skipif(not (MESHES / "bunny.ply").exists(), reason="shared real meshes not present")
+def test_real_bunny_recipe():
+    scene, mesh = make_scene(load_recipe(SCENES / "dtu_bunny.yaml"), scale="tiny")
+    obj = [i for i in scene.instances.values() if i.category == "bunny"]
+    assert obj and np.any(scene.gt_instance == obj[0].instance_id)
+
+
+# ----------------------------------------------------------------------------- determinism and atomic output
+def test_same_recipe_and_seed_give_identical_bytes(tmp_path):
+    a, b = tmp_path / "a", tmp_path / "b"
+    make_dataset(SCENES / "scannet_like_tiny.yaml", a, scale="tiny")
+    make_dataset(SCENES / "scannet_like_tiny.yaml", b, scale="tiny")
+    da, db = _tree_digest(a), _tree_digest(b)
+    assert da == db and len(da) > 20
+
+
+def test_different_seed_gives_different_scene(tmp_path):
+    s0, _ = make_scene(load_recipe(SCENES / "scannet_like_tiny.yaml"), scale="tiny", seed=0)
+    s1, _ = make_scene(load_recipe(SCENES / "scannet_like_tiny.yaml"), scale="tiny", seed=1)
+    assert not np.array_equal(s0.cam_to_world, s1.cam_to_world)
+
+
+@pytest.mark.parametrize(
+    "data, match",
+    [
+        ({}, "empty"),
+        ({"name": "x", "kind": "room"}, "missing required key 'format'"),
+        ({"name": "x", "kind": "cave", "format": "scannet"}, "kind must be one of"),
+        ({"name": "x", "kind": "room", "format": "llff"}, "written as"),
+        ({"name": "x", "kind": "room", "format": "scannet", "colour": 1}, "unknown recipe keys"),
+        ({"name": "x", "kind": "room", "format": "scannet", "objects": [{"type": "piano"}]}, "type must be one of"),
+        ({"name": "x", "kind": "room", "format": "scannet", "seed": -1}, "seed"),
+    ],
+)
+def test_bad_recipes_raise_one_clear_error(tmp_path, data, match):
+    path = _write_recipe(tmp_path, data)
+    with pytest.raises(BenchInputError, match=match) as err:
+        load_recipe(path)
+    assert str(path) in str(err.value)
+
+
+@pytest.mark.parametrize(
+    "effects, match",
+    [
+        ([{"name": "no_such_effect"}], "no_such_effect"),
+        ([{"name": "sensor_noise", "sigma": -3.0}], "sigma"),
+        ([{"name": "sensor_noise", "volume": 2}], "volume"),
+    ],
+)
+def test_bad_effects_fail_and_leave_nothing_behind(tmp_path, effects, match):
+    path = _write_recipe(tmp_path, {"name": "bad", "kind": "room", "format": "scannet", "preset": "scannet",
+                                    "objects": [{"type": "table"}], "effects": effects})
+    out = tmp_path / "out"
+    with pytest.raises(BenchInputError, match=match):
+        make_dataset(path, out, scale="tiny")
+    assert not out.exists()
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def test_missing_user_mesh_is_a_clear_error(tmp_path):
+    path = _write_recipe(tmp_path, {"name": "m", "kind": "object", "format": "dtu", "object": {"type": "mesh", "path": "nope.ply"}})
+    with pytest.raises(BenchInputError, match="nope.ply"):
+        make_scene(load_recipe(path), scale="tiny")
+
+
+def test_per_scale_values_need_the_requested_scale():
+    r = parse_recipe({"name": "x", "kind": "room", "format": "scannet", "image": {"small": [128, 96]}}, "mem")
+    with pytest.raises(BenchInputError, match="no value for scale 'tiny'"):
+        make_scene(r, scale="tiny")
