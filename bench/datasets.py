@@ -49,5 +49,11 @@ def load_dataset(scene_name: str, scale: str, cache_dir: Path = DEFAULT_CACHE) -
     """Synthesise (if needed) and load a scene; LLFF scenes load their ``images_N`` downsampled copy."""
     from bench.formats import load_scene
 
+    from bench.synth.recipe import load_recipe
+
     folder = ensure_dataset(scene_name, scale, cache_dir)
+    recipe = load_recipe(recipe_path(scene_name))
+    if recipe.format == "llff":  # the LLFF protocol trains and evaluates on images_N (FSGS: images_8)
+        factors = recipe.get("llff", "factors", scale=scale, default=[2])
+        return load_scene(folder, factor=int(factors[0]))
     return load_scene(folder)
