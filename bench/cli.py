@@ -3,6 +3,9 @@
     bench list                                   methods, tables, scenes
     bench scenes make RECIPE --out DIR           synthesise a scene into a dataset folder
     bench run --table NAME [--scale small] ...   run a table's jobs, write CSV / markdown / plot
+              [--executor local|dask] [--workers N] [--scheduler tcp://HOST:PORT] [--retries R]
+    bench regress --table NAME [--scale small] [--update-reference]
+                                                 fresh run vs results/reference/<scale>/<table>.json
     bench report [--out DIR]                     rebuild every table from stored results
 
 Bad input (a missing file, a bad recipe, an unknown table) prints one line naming the file and the
@@ -21,6 +24,7 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 TABLES_DIR = REPO_ROOT / "configs" / "tables"
 SCENES_DIR = REPO_ROOT / "configs" / "scenes"
 DEFAULT_OUT = REPO_ROOT / "results" / "runs"
+REFERENCE_DIR = REPO_ROOT / "results" / "reference"
 
 
 def _table_path(name: str) -> Path:
@@ -71,9 +75,23 @@ def _print_table_summary(md_path: Path) -> None:
     print(md_path.read_text())
 
 
-def cmd_run(args: argparse.Namespace) -> int:
+def select_plans(spec, plans: list, rows: list[str] | None, scenes: list[str] | None, seeds: list[int] | None) -> list:
+    """Restrict a table's job plans to some row labels / scenes, or replace its seeds (CLI filters)."""
     from dataclasses import replace
 
+    if rows:
+        unknown = set(rows) - {r.label for r in spec.rows}
+        if unknown:
+            raise BenchInputError(spec.path or spec.name, f"no row(s) {sorted(unknown)} (rows: {[r.label for r in spec.rows]})")
+        plans = [p for p in plans if p.row in rows]
+    if scenes:
+        plans = [p for p in plans if p.scene in scenes]
+    if seeds:
+        plans = [replace(p, seed=s) for p in {(p.row, p.group, p.scene): p for p in plans}.values() for s in seeds]
+    return plans
+
+
+def cmd_run(args: argparse.Namespace) -> int:
     from bench.report import build_table, collect_results, write_table_outputs
     from bench.runner import resolve_jobs, run_jobs
     from bench.tables import load_table_spec, plan_jobs
@@ -87,18 +105,15 @@ def cmd_run(args: argparse.Namespace) -> int:
     out = Path(args.out) / args.scale
     for name in names:
         spec = load_table_spec(_table_path(name))
-        plans = plan_jobs(spec, args.scale)
-        if args.scenes:
-            plans = [p for p in plans if p.scene in args.scenes]
-        if args.seeds:
-            plans = [replace(p, seed=s) for p in {(p.row, p.group, p.scene): p for p in plans}.values() for s in args.seeds]
+        plans = select_plans(spec, plan_jobs(spec, args.scale), args.rows, args.scenes, args.seeds)
         jobs, pending = resolve_jobs(plans)
         pending_methods = sorted({p.method for p in pending})
         print(f"table {name}: {len(jobs)} jobs to run or reuse at scale {args.scale!r}"
               + (f"; pending (not implemented yet): {', '.join(pending_methods)}" if pending_methods else ""))
-        run_jobs(jobs, out, force=args.force, show_progress=not args.quiet)
+        with _executor(args) as executor:
+            run_jobs(jobs, out, force=args.force, show_progress=not args.quiet, executor=executor)
         df = collect_results(out)
-        if args.scenes or args.seeds:
+        if args.scenes or args.seeds or args.rows:
             keep = {j.job_id for j in jobs}
             df = df[df["job_id"].isin(keep)]
         report = build_table(spec, df, args.scale, available_methods())
@@ -106,6 +121,39 @@ def cmd_run(args: argparse.Namespace) -> int:
         _print_table_summary(paths["md"])
         print(f"wrote {paths['csv']}, {paths['md']}, {paths['png']}")
     return 0
+
+
+def _executor(args: argparse.Namespace):
+    """The executor the ``--executor / --workers / --scheduler / --retries`` flags ask for."""
+    from bench.executors import make_executor
+
+    if args.workers is not None and args.workers < 1:
+        raise BenchInputError("--workers", f"must be >= 1, got {args.workers}")
+    if args.retries < 0:
+        raise BenchInputError("--retries", f"must be >= 0, got {args.retries}")
+    if args.scheduler is not None and args.executor != "dask":
+        raise BenchInputError("--scheduler", "only with --executor dask")
+    return make_executor(args.executor, workers=args.workers, scheduler=args.scheduler, retries=args.retries)
+
+
+def _add_executor_flags(p: argparse.ArgumentParser) -> None:
+    from bench.executors import DEFAULT_RETRIES, EXECUTORS
+
+    p.add_argument("--executor", default="local", choices=EXECUTORS,
+                   help="where jobs run: local processes (default) or a Dask cluster (docs/scale-out.md)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="local: parallel worker processes (default 1: in this process); "
+                        "dask without --scheduler: size of a local cluster (default 2)")
+    p.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+                   help="dask: address of a running scheduler (default: start a local cluster)")
+    p.add_argument("--retries", type=int, default=DEFAULT_RETRIES,
+                   help=f"resubmissions of a job whose worker died (default {DEFAULT_RETRIES})")
+
+
+def cmd_regress(args: argparse.Namespace) -> int:
+    from bench.regress import run_regress
+
+    return run_regress(args)
 
 
 def cmd_report(args: argparse.Namespace) -> int:
@@ -141,12 +189,27 @@ def build_parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="run a table's jobs and write its CSV, markdown and plot")
     run.add_argument("--table", required=True, nargs="+", help="table name(s) from configs/tables/, or 'all'")
     run.add_argument("--scale", default="small", choices=SCALES)
+    run.add_argument("--rows", nargs="+", default=None, help="restrict to these row labels")
     run.add_argument("--scenes", nargs="+", default=None, help="restrict to these scenes")
     run.add_argument("--seeds", nargs="+", type=int, default=None, help="use these seeds instead of the table's")
     run.add_argument("--out", default=str(DEFAULT_OUT), help="results folder (a sub-folder per scale)")
     run.add_argument("--force", action="store_true", help="rerun jobs whose results exist")
     run.add_argument("--quiet", action="store_true", help="no progress bars")
+    _add_executor_flags(run)
     run.set_defaults(func=cmd_run)
+
+    reg = sub.add_parser("regress", help="compare a fresh run with the stored reference results; non-zero exit on regression")
+    reg.add_argument("--table", required=True, nargs="+", help="table name(s) from configs/tables/, or 'all'")
+    reg.add_argument("--scale", default="small", choices=SCALES)
+    reg.add_argument("--out", default=str(DEFAULT_OUT / "regress"),
+                     help="where the fresh run and the regression report go (a sub-folder per scale)")
+    reg.add_argument("--reference-dir", default=str(REFERENCE_DIR), help="stored references (a sub-folder per scale)")
+    reg.add_argument("--update-reference", action="store_true",
+                     help="store this run as the new reference (refused if a job failed)")
+    reg.add_argument("--rows", nargs="+", default=None, help="restrict to these row labels (the others count as not run)")
+    reg.add_argument("--quiet", action="store_true", help="no progress bars")
+    _add_executor_flags(reg)
+    reg.set_defaults(func=cmd_regress)
 
     rep = sub.add_parser("report", help="rebuild tables and one report.md from stored results")
     rep.add_argument("--table", nargs="+", default=None)

@@ -4,6 +4,12 @@ A job's id is a hash of what determines its result: method name, resolved method
 content, seed, scale, evaluation protocol and the code version. Results are written atomically to
 ``<out>/jobs/<job_id>.json``; a rerun skips jobs whose result exists (unless ``force``). A job that
 raises is recorded as ``status: failed`` with its error and traceback, never silently dropped.
+
+Where jobs run is an executor's business (``bench/executors/``: a local process pool by default, Dask
+distributed for clusters); :func:`run_jobs` hands it the jobs still to do and writes each row as it
+arrives. Besides the schema-1 fields of :func:`run_job`, rows from :func:`run_jobs` carry
+``attempts`` (1 unless a worker died), ``wall_seconds`` (on the worker, dataset preparation included),
+``worker_name``, ``executor`` and ``torch_threads``.
 """
 
 from __future__ import annotations
@@ -18,7 +24,7 @@ import time
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 from bench import __version__
 from bench.atomic import atomic_write_json
@@ -26,6 +32,9 @@ from bench.datasets import DEFAULT_CACHE, load_dataset, recipe_hash, recipe_path
 from bench.evaluate import evaluate_snapshot
 from bench.tables import JobPlan
 from methods.registry import available_methods, get_method, method_config
+
+if TYPE_CHECKING:
+    from bench.executors.base import Executor
 
 RESULT_SCHEMA = 1
 
@@ -79,10 +88,10 @@ def _versions() -> dict[str, str]:
     return {"bench": __version__, "python": platform.python_version(), "numpy": numpy.__version__, "torch": torch.__version__, "open3d": open3d.__version__}
 
 
-def run_job(job: Job, cache_dir: Path = DEFAULT_CACHE, progress: Callable[[float, str], None] | None = None) -> dict[str, Any]:
-    """Run one job end to end (data, method, evaluation of every snapshot) and return its result row."""
+def row_head(job: Job) -> dict[str, Any]:
+    """The identifying fields every result row starts with (the JSON schema, version 1)."""
     plan = job.plan
-    row: dict[str, Any] = {
+    return {
         "job_id": job.job_id,
         "schema": RESULT_SCHEMA,
         "table": plan.table,
@@ -99,6 +108,20 @@ def run_job(job: Job, cache_dir: Path = DEFAULT_CACHE, progress: Callable[[float
         "worker": f"{socket.gethostname()}:{os.getpid()}",
         "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
     }
+
+
+def failure_row(job: Job, error_type: str, message: str, tb: str) -> dict[str, Any]:
+    """A ``failed`` result row (same schema as :func:`run_job`'s) for an error outside the job's code."""
+    row = row_head(job)
+    row.update(status="failed", metrics={}, curve=[], iterations=0, timings={},
+               error={"type": error_type, "message": message, "traceback": tb})
+    return row
+
+
+def run_job(job: Job, cache_dir: Path = DEFAULT_CACHE, progress: Callable[[float, str], None] | None = None) -> dict[str, Any]:
+    """Run one job end to end (data, method, evaluation of every snapshot) and return its result row."""
+    plan = job.plan
+    row = row_head(job)
     timings: dict[str, float] = {}
     t_start = time.perf_counter()
     try:
@@ -128,42 +151,109 @@ def run_job(job: Job, cache_dir: Path = DEFAULT_CACHE, progress: Callable[[float
     return row
 
 
+def needs_run(path: Path, force: bool = False) -> bool:
+    """True if the job stored at ``path`` must (re)run: ``force``, no stored row, or a stored failure
+    whose worker died (``WorkerLost``: not the job's fault, so a rerun tries again). A job that raised
+    keeps its failed row until ``force`` (it would fail again)."""
+    from bench.executors.base import WORKER_LOST
+
+    if force or not path.exists():
+        return True
+    try:
+        stored = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return True  # unreadable: run it again (the write is atomic, so this is not a half-written row)
+    return stored.get("status") == "failed" and (stored.get("error") or {}).get("type") == WORKER_LOST
+
+
 def run_jobs(
     jobs: list[Job],
     out_dir: Path,
     cache_dir: Path = DEFAULT_CACHE,
     force: bool = False,
     show_progress: bool = True,
+    executor: "Executor | None" = None,
 ) -> list[dict[str, Any]]:
-    """Run every job whose result is not stored yet (all of them with ``force``), with a progress bar.
+    """Plan -> executor -> write each result atomically as it arrives.
+
+    Runs every job whose result is not stored yet (all of them with ``force``; see :func:`needs_run`)
+    on ``executor`` (default: :class:`~bench.executors.local.LocalExecutor` with one worker, in this
+    process), writes each row to ``<out_dir>/jobs/<job_id>.json`` the moment the executor reports it,
+    and shows progress (jobs done / running / failed). Jobs with the same id run once.
 
     Returns:
         The result rows of all jobs (stored or freshly computed), in job order.
     """
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-    rows: list[dict[str, Any]] = []
-    todo = [j for j in jobs if force or not result_path(out_dir, j).exists()]
-    with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-                  TimeElapsedColumn(), disable=not show_progress, transient=False) as bar:
-        overall = bar.add_task("jobs", total=len(todo))
-        for job in jobs:
-            path = result_path(out_dir, job)
-            if job in todo:
-                desc = f"{job.plan.row} | {job.plan.scene} | seed {job.plan.seed}"
-                bar.update(overall, description=desc)
-                inner = bar.add_task(f"  {job.plan.method}", total=1.0)
+    from bench.executors.local import LocalExecutor
 
-                def progress(frac: float, msg: str, _t=inner) -> None:
-                    bar.update(_t, completed=frac, description=f"  {msg}")
+    own = executor is None
+    executor = LocalExecutor(workers=1) if executor is None else executor
+    by_id: dict[str, Job] = {}
+    for j in jobs:
+        if j.job_id not in by_id and needs_run(result_path(out_dir, j), force):
+            by_id[j.job_id] = j
+    todo = list(by_id.values())
+    fresh: dict[str, dict[str, Any]] = {}
+    done = failed = retried = running = 0
 
-                row = run_job(job, cache_dir, progress)
-                bar.remove_task(inner)
-                atomic_write_json(path, row)
-                bar.advance(overall)
-                if row["status"] != "ok":
-                    bar.console.print(f"[red]job failed[/red] {desc}: {row['error']['type']}: {row['error']['message']}")
-            else:
-                row = json.loads(path.read_text())
-            rows.append(row)
+    def status() -> str:
+        return (f"jobs [{executor.describe()}]: {done}/{len(todo)} done, {running} running, {failed} failed"
+                + (f", {retried} retried" if retried else ""))
+
+    try:
+        with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                      TimeElapsedColumn(), disable=not show_progress, transient=False) as bar:
+            overall = bar.add_task(status(), total=len(todo))
+            inner: dict[str, Any] = {}
+
+            def progress_for(job: Job) -> Callable[[float, str], None]:
+                task = bar.add_task(f"  {job.plan.method} | {job.plan.scene} | seed {job.plan.seed}", total=1.0)
+                inner[job.job_id] = task
+
+                def progress(frac: float, msg: str) -> None:
+                    bar.update(task, completed=frac, description=f"  {msg}")
+
+                return progress
+
+            for ev in executor.run(todo, Path(cache_dir), progress_for if show_progress else None):
+                if ev.kind == "started":
+                    running += 1
+                elif ev.kind == "status" and ev.running is not None:
+                    running = ev.running
+                elif ev.kind == "retry":
+                    retried += 1
+                    running = max(0, running - 1)
+                    bar.console.print(f"[yellow]retrying[/yellow] {_describe(ev.job)} (attempt {ev.attempt}): {ev.message}")
+                elif ev.kind == "done":
+                    assert ev.job is not None and ev.row is not None
+                    atomic_write_json(result_path(out_dir, ev.job), ev.row)
+                    fresh[ev.job.job_id] = ev.row
+                    done += 1
+                    running = max(0, running - 1)
+                    if ev.job.job_id in inner:
+                        bar.remove_task(inner.pop(ev.job.job_id))
+                    if ev.row["status"] != "ok":
+                        failed += 1
+                        err = ev.row.get("error") or {}
+                        bar.console.print(f"[red]job failed[/red] {_describe(ev.job)}: {err.get('type')}: {err.get('message')}")
+                    bar.advance(overall)
+                bar.update(overall, description=status())
+    finally:
+        if own:
+            executor.close()
+    if not show_progress and todo:
+        print(status())
+    rows = []
+    for j in jobs:
+        row = fresh.get(j.job_id)
+        if row is None:
+            path = result_path(out_dir, j)
+            row = json.loads(path.read_text())
+        rows.append(row)
     return rows
+
+
+def _describe(job: Job | None) -> str:
+    return "?" if job is None else f"{job.plan.row} | {job.plan.scene} | seed {job.plan.seed}"

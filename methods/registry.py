@@ -11,7 +11,8 @@ import yaml
 from bench.errors import BenchInputError
 
 _REGISTRY: dict[str, type] = {}
-_BUILTIN_MODULES = ("methods.oracle_tsdf",)
+_BUILTIN_MODULES = ("methods.oracle_tsdf", "methods.monosdf.method", "methods.monoinstance.method",
+                    "methods.gaussians.methods")
 CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs" / "methods"
 
 
@@ -47,21 +48,33 @@ def get_method(name: str) -> Any:
     return _REGISTRY[name]()
 
 
-def method_config(name: str, scale: str, overrides: dict[str, Any] | None = None, config_dir: Path = CONFIG_DIR) -> dict[str, Any]:
-    """Resolve a method's config: ``defaults`` <- ``scales[scale]`` <- ``overrides`` (later wins).
-
-    ``configs/methods/<name>.yaml`` has the shape ``{description: str, defaults: {...}, scales: {tiny: {...}, ...}}``.
-    Overrides may only name keys that exist in ``defaults`` (a typo is an error, not a silent no-op).
-    """
+def _read_config(name: str, config_dir: Path) -> tuple[Path, dict[str, Any], dict[str, Any]]:
+    """(path, defaults, scales) of ``configs/methods/<name>.yaml``, with ``base:`` inheritance resolved."""
     path = config_dir / f"{name}.yaml"
     if not path.exists():
         raise BenchInputError(path, f"no config file for method {name!r}")
     data = yaml.safe_load(path.read_text()) or {}
     defaults = dict(data.get("defaults") or {})
-    scales = data.get("scales") or {}
+    scales = {k: dict(v or {}) for k, v in (data.get("scales") or {}).items()}
+    if data.get("base"):
+        _, base_defaults, base_scales = _read_config(str(data["base"]), config_dir)
+        defaults = {**base_defaults, **defaults}
+        scales = {k: {**base_scales.get(k, {}), **scales.get(k, {})} for k in set(base_scales) | set(scales)}
+    return path, defaults, scales
+
+
+def method_config(name: str, scale: str, overrides: dict[str, Any] | None = None, config_dir: Path = CONFIG_DIR) -> dict[str, Any]:
+    """Resolve a method's config: ``defaults`` <- ``scales[scale]`` <- ``overrides`` (later wins).
+
+    ``configs/methods/<name>.yaml`` has the shape ``{description, base (optional), defaults: {...},
+    scales: {tiny: {...}, ...}}``; ``base: other`` inherits the other method's defaults and scale presets
+    (a variant family shares one training loop and one config, not a copy). Overrides may only name
+    keys that exist in ``defaults`` (a typo is an error, not a silent no-op).
+    """
+    path, defaults, scales = _read_config(name, config_dir)
     if scale not in scales:
         raise BenchInputError(path, f"no preset for scale {scale!r} (has {sorted(scales)})")
-    cfg = {**defaults, **(scales[scale] or {})}
+    cfg = {**defaults, **scales[scale]}
     for key, value in (overrides or {}).items():
         if key not in defaults:
             raise BenchInputError(path, f"override {key!r} is not a config key of {name!r} (keys: {sorted(defaults)})")

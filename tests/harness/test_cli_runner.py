@@ -13,13 +13,14 @@ from bench.tables import JobPlan, load_table_spec, plan_jobs
 from methods.registry import available_methods, method_config
 
 REPO = Path(__file__).resolve().parents[2]
+ORACLE = "Oracle: TSDF of GT depth (upper bound)"
 
 
 @pytest.fixture(scope="module")
 def tiny_run(tmp_path_factory):
     """`bench run --table ablation --scale tiny` once for the module (oracle row only until methods land)."""
     out = tmp_path_factory.mktemp("runs")
-    code = main(["run", "--table", "ablation", "--scale", "tiny", "--out", str(out), "--quiet"])
+    code = main(["run", "--table", "ablation", "--scale", "tiny", "--rows", ORACLE, "--out", str(out), "--quiet"])
     return code, out / "tiny"
 
 
@@ -43,7 +44,7 @@ def test_run_ablation_tiny_writes_table_with_oracle_row(tiny_run, capsys):
 def test_rerun_skips_finished_jobs(tiny_run):
     _, out = tiny_run
     files = {p: p.stat().st_mtime_ns for p in (out / "jobs").glob("*.json")}
-    assert main(["run", "--table", "ablation", "--scale", "tiny", "--out", str(out.parent), "--quiet"]) == 0
+    assert main(["run", "--table", "ablation", "--scale", "tiny", "--rows", ORACLE, "--out", str(out.parent), "--quiet"]) == 0
     assert {p: p.stat().st_mtime_ns for p in (out / "jobs").glob("*.json")} == files
     assert not [p for p in out.rglob("*.tmp")]
 

@@ -1,0 +1,126 @@
+"""The registered ``monoinstance`` method: MonoInstance on the MonoSDF base (paper Sec. 3.4, official schedule).
+
+Stage 1 (``stage1_fraction`` = 1/4 of the iterations): plain MonoSDF (uniform prior weights, uniform
+rays). Between the stages: render every training view's depth at 1/``ref_depth_downscale`` resolution,
+run the shared uncertainty stage (``methods.monoinstance.stage``: alignment, multi-view consistent
+instances, density uncertainty). Stage 2: the modules switched on by config -
+
+* ``uncertainty``: adaptive depth / normal loss, per-ray weight c = 1 - U, instance rays with
+  c < ``certainty_cutoff`` (0.2, code) set to 0;
+* ``guided_sampling``: :class:`methods.monoinstance.sampling.GuidedSampler`;
+* ``mask_constraint``: :class:`methods.monoinstance.mask_constraint.MaskConstraint` (weight 0.4).
+
+With all three off this is exactly MonoSDF (no stage in between): the ablation's Base row. The four
+rows of Table 4 are configs of this one method. Optional code-only final phase
+(``final_phase_fraction``): mask constraint off, depth weight 0.1, normal weight 0.005.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+import torch
+
+from bench.scene import Scene
+from methods.base import Artifacts, ProgressFn, Snapshot
+from methods.monoinstance.mask_constraint import MaskConstraint
+from methods.monoinstance.sampling import GuidedSampler
+from methods.monoinstance.stage import run_uncertainty_stage
+from methods.monosdf.method import set_threads
+from methods.monosdf.trainer import MonoSDFTrainer
+from methods.registry import register
+
+
+def certainty_weights(uncertainty: np.ndarray, instance_ids: np.ndarray, is_background: dict[int, bool], cutoff: float) -> np.ndarray:
+    """Per-pixel prior weights c = 1 - U; foreground-instance pixels with c < cutoff -> 0 (code). (V, H, W)."""
+    c = 1.0 - uncertainty.astype(np.float32)
+    fg = np.zeros(instance_ids.shape, dtype=bool)
+    for k in np.unique(instance_ids):
+        if k != 0 and not is_background.get(int(k), False):
+            fg |= instance_ids == k
+    c[fg & (c < cutoff)] = 0.0
+    return c
+
+
+@register("monoinstance")
+class MonoInstance:
+    """MonoSDF + MonoInstance's uncertainty modules (each switchable by config)."""
+
+    name = "monoinstance"
+
+    def fit(self, scene: Scene, config: dict[str, Any], seed: int, progress: ProgressFn | None = None) -> Artifacts:
+        set_threads(config)
+        t_start = time.perf_counter()
+        trainer = MonoSDFTrainer(scene, config, seed)
+        timings = {"setup": time.perf_counter() - t_start}
+        total = int(config["iterations"])
+        marks = sorted({max(1, int(round(f * total))) for f in config["fractions"]})
+        modules_on = bool(config["uncertainty"] or config["guided_sampling"] or config["mask_constraint"])
+        stage1_end = max(1, int(round(float(config["stage1_fraction"]) * total))) if modules_on else total
+        final_start = total - int(round(float(config["final_phase_fraction"]) * total))
+        snapshots: list[Snapshot] = []
+        extra: dict[str, Any] = {}
+        train_s = mesh_s = 0.0
+        uncertainty: np.ndarray | None = None
+        mask_loss: MaskConstraint | None = None
+
+        def run_until(step: int) -> None:
+            nonlocal train_s
+            t = time.perf_counter()
+            while trainer.step_count < step:
+                if modules_on and trainer.step_count == final_start and final_start < total:  # code-only final phase
+                    trainer.extra_losses.clear()
+                    trainer.cfg = {**trainer.cfg, "depth_weight": 0.1, "normal_weight": 0.005}
+                logs = trainer.step()
+                if progress and trainer.step_count % 25 == 0:
+                    progress(trainer.step_count / total, f"step {trainer.step_count}/{total} loss {logs['loss']:.4f}")
+            train_s += time.perf_counter() - t
+
+        for mark in sorted(set(marks) | {stage1_end}):
+            run_until(mark)
+            if mark == stage1_end and modules_on:
+                uncertainty, mask_loss = self._between_stages(trainer, scene, config, seed, timings, extra)
+            if mark in marks:
+                t = time.perf_counter()
+                mesh = trainer.extract_mesh(int(config["mesh_resolution"]))
+                mesh_s = time.perf_counter() - t
+                elapsed = time.perf_counter() - t_start
+                snapshots.append(Snapshot(mark / total, trainer.step_count, elapsed, mesh=mesh))
+        timings.update(train=train_s, mesh=mesh_s)
+        extra["beta"] = float(trainer.density.beta().detach())
+        full_u = None
+        if uncertainty is not None:
+            full_u = np.zeros((scene.num_views, scene.height, scene.width), dtype=np.float32)
+            full_u[trainer.views] = uncertainty
+        return Artifacts(snapshots=snapshots, timings=timings, iterations=trainer.step_count, uncertainty=full_u, extra=extra)
+
+    @staticmethod
+    def _between_stages(trainer: MonoSDFTrainer, scene: Scene, config: dict[str, Any], seed: int,
+                        timings: dict[str, float], extra: dict[str, Any]) -> tuple[np.ndarray, MaskConstraint | None]:
+        """Render the reference depth, run the uncertainty stage, switch on the stage-2 modules."""
+        stage_cfg = dict(config["uncertainty_stage"] or {})
+        f = int(stage_cfg.get("ref_depth_downscale", 4))
+        t = time.perf_counter()
+        ref = np.zeros((scene.num_views, -(-scene.height // f), -(-scene.width // f)), dtype=np.float32)
+        for slot, v in enumerate(trainer.views):
+            ref[v] = trainer.render_view_depth(slot, stride=f)
+        timings["render_ref_depth"] = time.perf_counter() - t
+        result = run_uncertainty_stage(scene, ref, stage_cfg, rng_seed=seed, quality=scene.gt_depth is not None)
+        timings["segmentation"] = float(result.timings.get("segmentation", 0.0))
+        timings["uncertainty"] = float(result.timings.get("align", 0.0) + result.timings.get("uncertainty", 0.0))
+        extra.update({k: float(v) for k, v in result.quality.items() if isinstance(v, (int, float))})
+        views = trainer.views
+        U = result.uncertainty[views]
+        ids = result.instance_ids[views]
+        c = certainty_weights(U, ids, result.is_background, float(config["certainty_cutoff"]))
+        if config["uncertainty"]:
+            trainer.prior_weight = torch.from_numpy(c.reshape(len(views), -1))
+        if config["guided_sampling"]:
+            trainer.pixel_sampler = GuidedSampler(ids, result.is_background, U, prob_offset=float(config["sampling_prob_offset"]))
+        mask_loss = None
+        if config["mask_constraint"]:
+            mask_loss = MaskConstraint(trainer, ids, result.is_background, c <= 0, config)
+            trainer.extra_losses.append(mask_loss)
+        return U, mask_loss

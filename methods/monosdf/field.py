@@ -1,0 +1,182 @@
+"""The SDF and colour networks (MonoSDF's grid variant, scaled down for a CPU).
+
+SDF network: ``[grid features(x / R), x / R] -> Softplus(beta=100) MLP -> (sdf, geometry feature)``.
+Its spatial gradient (normals, eikonal term) is computed EXPLICITLY as differentiable tensor ops: the
+grid returns ``d feat / d x`` analytically, and the MLP's vector-Jacobian product for its single SDF
+output is written out layer by layer (``g <- (g * softplus'(z)) @ W``, softplus' = a sigmoid). The
+gradient is then an ordinary differentiable tensor, so the eikonal and normal losses need only a
+first-order backward (no double backward, which is slow on a CPU and unsupported by ``torch.compile``).
+(Forward-mode propagation of the 3-column Jacobian was measured 3x slower: it pushes (P, 3, H) through
+every layer instead of (P, H).) A slow twin,
+:func:`sdf_gradient_autograd`, computes the same gradient with ``torch.autograd.grad`` for tests.
+
+The SDF is clamped to the bounding sphere like MonoSDF: ``sdf = min(sdf, R - |x|)`` (indoor scenes, so
+every ray ends inside the sphere); where the clamp is active the gradient is ``-x / |x|``.
+
+Geometric initialisation (IDR / MonoSDF): the network starts as a sphere SDF of radius ``init_radius``
+(``inside_out`` for rooms, where the cameras are inside the sphere: sdf > 0 inside).
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+import torch.nn.functional as F
+
+from methods.monosdf.grid import FeatureGrid, GridSpec, _load_extension, fast_available
+
+SOFTPLUS_BETA = 100.0
+
+
+def softplus_and_slope_reference(z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Softplus(beta=100) and its derivative sigmoid(beta z) (plain PyTorch twin of the fused kernel)."""
+    return F.softplus(z, beta=SOFTPLUS_BETA), torch.sigmoid(SOFTPLUS_BETA * z)
+
+
+class _SoftplusSlope(torch.autograd.Function):
+    """Fused C++ softplus + slope with a fused backward (the MLP needs both outputs)."""
+
+    @staticmethod
+    def forward(ctx, z: torch.Tensor):  # type: ignore[override]
+        a, s = _load_extension().softplus_slope_forward(z, SOFTPLUS_BETA)
+        ctx.save_for_backward(s)
+        return a, s
+
+    @staticmethod
+    def backward(ctx, grad_a: torch.Tensor, grad_s: torch.Tensor):  # type: ignore[override]
+        (s,) = ctx.saved_tensors
+        if grad_a is None:
+            grad_a = torch.zeros_like(s)
+        gs = grad_s if grad_s is not None else torch.zeros(0)
+        return _load_extension().softplus_slope_backward(grad_a, gs, s, SOFTPLUS_BETA)
+
+
+def _softplus_and_slope(z: torch.Tensor, fast: bool) -> tuple[torch.Tensor, torch.Tensor]:
+    if fast and z.dtype == torch.float32 and fast_available():
+        return _SoftplusSlope.apply(z)
+    return softplus_and_slope_reference(z)
+
+
+class SDFNetwork(torch.nn.Module):
+    """SDF field with analytic spatial gradient.
+
+    Args:
+        spec: feature-grid layout. hidden: MLP width. layers: hidden layers. geo_features: size of the
+        geometry feature passed to the colour network. radius: bounding-sphere radius R (normalised
+        units). init_radius: geometric-init sphere radius. inside_out: rooms (cameras inside).
+        fast_grid: use the C++ grid kernel.
+    """
+
+    def __init__(self, spec: GridSpec, hidden: int = 64, layers: int = 2, geo_features: int = 15, radius: float = 1.0,
+                 init_radius: float = 0.6, inside_out: bool = True, fast_grid: bool = True, seed: int = 0) -> None:
+        super().__init__()
+        torch.manual_seed(seed)
+        self.grid = FeatureGrid(spec, fast=fast_grid, seed=seed)
+        self.radius = float(radius)
+        dims = [spec.out_dim + 3] + [hidden] * layers + [1 + geo_features]
+        self.linears = torch.nn.ModuleList(torch.nn.Linear(dims[i], dims[i + 1]) for i in range(len(dims) - 1))
+        self._geometric_init(spec.out_dim, init_radius, inside_out)
+
+    def _geometric_init(self, n_grid: int, r: float, inside_out: bool) -> None:
+        """IDR geometric init: a sphere SDF of radius r in normalised-by-R coordinates."""
+        r_norm = r / self.radius
+        for i, lin in enumerate(self.linears):
+            out_dim, in_dim = lin.weight.shape
+            if i == len(self.linears) - 1:
+                mean = math.sqrt(math.pi) / math.sqrt(in_dim)
+                torch.nn.init.normal_(lin.weight, mean=-mean if inside_out else mean, std=1e-4)
+                torch.nn.init.constant_(lin.bias, r_norm if inside_out else -r_norm)
+            else:
+                torch.nn.init.constant_(lin.bias, 0.0)
+                torch.nn.init.normal_(lin.weight, 0.0, math.sqrt(2) / math.sqrt(out_dim))
+                if i == 0:  # grid features start switched off: the MLP sees only x at init
+                    torch.nn.init.constant_(lin.weight[:, :n_grid], 0.0)
+
+    def forward(self, x: torch.Tensor, with_gradient: bool = True) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        """Evaluate the field.
+
+        Args:
+            x: (P, 3) points, normalised units (inside the sphere of radius R).
+            with_gradient: also return d sdf / d x.
+
+        Returns:
+            sdf (P,) in normalised units (clamped to the sphere), geometry feature (P, G), gradient (P, 3) or None.
+        """
+        xs = x / self.radius
+        feat, jac = self.grid(xs, with_jacobian=with_gradient)
+        a = torch.cat([feat, xs], dim=-1)
+        slopes = []
+        for lin in self.linears[:-1]:
+            a, slope = _softplus_and_slope(lin(a), self.grid.fast)
+            slopes.append(slope)
+        out = self.linears[-1](a)
+        sdf_net = out[:, 0] * self.radius  # the MLP works in x / R units; the SDF in normalised units
+        geo = out[:, 1:]
+        grad = None
+        if with_gradient:
+            # explicit vector-Jacobian product of the SDF output (differentiable, first-order ops only)
+            g = self.linears[-1].weight[0].expand_as(slopes[-1])
+            for lin, slope in zip(reversed(self.linears[:-1]), reversed(slopes)):
+                g = (g * slope) @ lin.weight  # (P, in)
+            c = jac.shape[-1]
+            grad = (jac * g[:, None, :c]).sum(-1) + g[:, c:]  # (P, 3); the 1/R and x R cancel
+        # bounding-sphere clamp (MonoSDF): every ray terminates inside the sphere
+        norm = x.norm(dim=-1)
+        sphere = self.radius - norm
+        clamp = sphere < sdf_net
+        sdf = torch.where(clamp, sphere, sdf_net)
+        if with_gradient:
+            grad = torch.where(clamp[:, None], -x / norm.clamp_min(1e-9)[:, None], grad)
+        return sdf, geo, grad
+
+
+def sdf_gradient_autograd(net: SDFNetwork, x: torch.Tensor) -> torch.Tensor:
+    """Slow, obviously-correct twin of the forward-mode gradient: ``torch.autograd.grad`` of the SDF
+    (through the reference grid path, which is differentiable w.r.t. x). (P, 3)."""
+    from methods.monosdf.grid import interpolate_reference
+
+    x = x.detach().requires_grad_(True)
+    xs = x / net.radius
+    feat, _ = interpolate_reference(net.grid.table, xs, net.grid.spec, with_jacobian=False)
+    a = torch.cat([feat, xs], dim=-1)
+    for lin in net.linears[:-1]:
+        a = F.softplus(lin(a), beta=SOFTPLUS_BETA)
+    sdf = torch.minimum(net.linears[-1](a)[:, 0] * net.radius, net.radius - x.norm(dim=-1))
+    return torch.autograd.grad(sdf.sum(), x)[0]
+
+
+class ColorNetwork(torch.nn.Module):
+    """MonoSDF's rendering network, scaled down: ``[x, view dir, normal, geo feature] -> MLP -> sigmoid RGB``."""
+
+    def __init__(self, geo_features: int = 15, hidden: int = 64, layers: int = 1) -> None:
+        super().__init__()
+        dims = [9 + geo_features] + [hidden] * layers + [3]
+        mods: list[torch.nn.Module] = []
+        for i in range(len(dims) - 1):
+            mods.append(torch.nn.Linear(dims[i], dims[i + 1]))
+            if i < len(dims) - 2:
+                mods.append(torch.nn.ReLU())
+        self.mlp = torch.nn.Sequential(*mods)
+
+    def forward(self, x: torch.Tensor, view_dirs: torch.Tensor, normals: torch.Tensor, geo: torch.Tensor) -> torch.Tensor:
+        """x, view_dirs, normals: (P, 3); geo: (P, G) -> rgb (P, 3) in [0, 1]."""
+        return torch.sigmoid(self.mlp(torch.cat([x, view_dirs, normals, geo], dim=-1)))
+
+
+class LaplaceDensity(torch.nn.Module):
+    """VolSDF density ``sigma(s) = (1 / beta) * (0.5 + 0.5 * sign(s) * expm1(-|s| / beta))`` with learnable
+    ``beta = |beta_param| + beta_min`` (MonoSDF: init 0.1, beta_min 1e-4). Uses ``expm1(-|s|/beta)`` in
+    (-1, 0], so extreme SDF values cannot overflow."""
+
+    def __init__(self, beta_init: float = 0.1, beta_min: float = 1e-4) -> None:
+        super().__init__()
+        self.beta_param = torch.nn.Parameter(torch.tensor(float(beta_init)))
+        self.beta_min = float(beta_min)
+
+    def beta(self) -> torch.Tensor:
+        return self.beta_param.abs() + self.beta_min
+
+    def forward(self, sdf: torch.Tensor, beta: torch.Tensor | None = None) -> torch.Tensor:
+        b = self.beta() if beta is None else beta
+        return (0.5 + 0.5 * torch.sign(sdf) * torch.expm1(-sdf.abs() / b)) / b

@@ -1,0 +1,83 @@
+"""MonoSDF's losses, with optional per-ray weights (MonoInstance's adaptive prior loss uses them).
+
+All take tensors of R rays from ONE image (the scale-and-shift system is per image, never across
+images: a pitfall in REFERENCE.md).
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+
+
+def color_loss(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """L1 colour loss, mean over rays and channels. pred, target: (R, 3)."""
+    return (pred - target).abs().mean()
+
+
+def eikonal_loss(grad: torch.Tensor) -> torch.Tensor:
+    """mean (|grad| - 1)^2 over points. grad: (P, 3)."""
+    return ((grad.norm(dim=-1) - 1.0) ** 2).mean()
+
+
+def solve_scale_shift(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor, eps: float = 1e-8) -> tuple[torch.Tensor, torch.Tensor]:
+    """Closed-form weighted least squares ``min_{s,t} sum w (s * pred + t - target)^2`` (MiDaS / MonoSDF).
+
+    The 2 x 2 normal equations are solved explicitly; when the determinant is (near) zero - a
+    constant ``pred``, fewer than 2 weighted rays - both are 0 (MonoSDF's behaviour), which makes the
+    loss constant: finite, zero gradient. Differentiable (gradients flow through s and t).
+
+    Args:
+        pred, target, weight: (R,).
+
+    Returns:
+        (scale, shift) scalars.
+    """
+    a00 = (weight * pred * pred).sum()
+    a01 = (weight * pred).sum()
+    a11 = weight.sum()
+    b0 = (weight * pred * target).sum()
+    b1 = (weight * target).sum()
+    det = a00 * a11 - a01 * a01
+    ok = det.abs() > eps * (a00 * a11).abs().clamp_min(eps)
+    safe_det = torch.where(ok, det, torch.ones_like(det))
+    scale = torch.where(ok, (a11 * b0 - a01 * b1) / safe_det, torch.zeros_like(det))
+    shift = torch.where(ok, (-a01 * b0 + a00 * b1) / safe_det, torch.zeros_like(det))
+    return scale, shift
+
+
+def ssi_depth_loss(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
+    """Scale-and-shift-invariant depth loss (MonoSDF): align the rendered depth to the prior in closed
+    form, then the weighted mean squared residual in prior units.
+
+    Args:
+        pred: (R,) rendered z-depth; target: (R,) monocular prior (0 = invalid); weight: (R,) per-ray
+            weights in [0, 1] (1 for MonoSDF; MonoInstance's certainty 1 - U), zeroed where invalid.
+
+    Returns:
+        scalar loss (0 when no ray is valid).
+    """
+    w = weight * (target > 0).to(weight.dtype)
+    s, t = solve_scale_shift(pred, target, w)
+    res = s * pred + t - target
+    return (w * res * res).sum() / w.sum().clamp_min(1.0)
+
+
+def normal_loss(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """MonoSDF's normal loss terms, per-ray weighted: (L1 of the difference summed over xyz, 1 - cos).
+
+    Args:
+        pred: (R, 3) rendered normals (any length; normalised here), camera frame.
+        target: (R, 3) prior normals, camera frame (0 = invalid).
+        weight: (R,) per-ray weights.
+
+    Returns:
+        (l1, angular) scalars (means over valid weighted rays).
+    """
+    w = weight * (target.norm(dim=-1) > 0.5).to(weight.dtype)
+    p = F.normalize(pred, dim=-1, eps=1e-8)
+    q = F.normalize(target, dim=-1, eps=1e-8)
+    denom = w.sum().clamp_min(1.0)
+    l1 = (w * (p - q).abs().sum(-1)).sum() / denom
+    ang = (w * (1.0 - (p * q).sum(-1))).sum() / denom
+    return l1, ang

@@ -1,0 +1,74 @@
+"""Rays of a Scene in the normalised frame (MonoSDF: ``x_norm = inv(scale_mat) @ x_world``).
+
+The normalised frame maps the scene's region of interest into the unit sphere. For each training view
+we precompute the camera centre, per-pixel unit ray directions, the factor turning distance along a
+unit ray into z-depth (``1 / |K^-1 [u, v, 1]|``), and the near/far bounds from the bounding sphere.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from bench.errors import BenchInputError
+from bench.scene import Scene, pixel_rays_camera
+
+
+@dataclass
+class RayBundle:
+    """Per-view ray data of the training views, all float32 torch tensors, normalised units.
+
+    Attributes:
+        origins: (V, 3) camera centres.
+        dirs: (V, H*W, 3) unit ray directions (world axes).
+        z_factor: (V, H*W) multiply a distance along ``dirs`` by this to get z-depth.
+        far: (V, H*W) distance to the bounding-sphere exit.
+        world_to_cam_rot: (V, 3, 3) rotation world -> camera (for camera-frame normals).
+        scale: metres per normalised unit.
+    """
+
+    origins: torch.Tensor
+    dirs: torch.Tensor
+    z_factor: torch.Tensor
+    far: torch.Tensor
+    world_to_cam_rot: torch.Tensor
+    scale: float
+
+
+def normalisation(scene: Scene) -> tuple[np.ndarray, float]:
+    """(centre (3,), scale) of the scene's ``scale_mat`` (a similarity: uniform scale + translation)."""
+    m = np.asarray(scene.scale_mat, dtype=np.float64)
+    s = float(np.cbrt(abs(np.linalg.det(m[:3, :3]))))
+    return m[:3, 3].copy(), s
+
+
+def build_rays(scene: Scene, views: np.ndarray, radius: float) -> RayBundle:
+    """Precompute rays of ``views``; raises BenchInputError if a camera is outside the bounding sphere.
+
+    Args:
+        scene: the scene. views: (V,) view indices. radius: bounding-sphere radius (normalised units).
+    """
+    centre, scale = normalisation(scene)
+    origins, dirs, zf, far, rots = [], [], [], [], []
+    for v in views:
+        K, c2w = scene.intrinsics[v], scene.cam_to_world[v]
+        d_cam = pixel_rays_camera(K, scene.height, scene.width).reshape(-1, 3)  # z = 1
+        norm = np.linalg.norm(d_cam, axis=1)
+        d_world = (d_cam / norm[:, None]) @ c2w[:3, :3].T
+        o = (c2w[:3, 3] - centre) / scale
+        if np.linalg.norm(o) >= radius:
+            raise BenchInputError(scene.root or scene.name, f"camera {int(v)} is outside the bounding sphere "
+                                  f"(|c| = {np.linalg.norm(o):.3f} >= R = {radius} in normalised units); "
+                                  "increase the method's bounding_sphere or fix the scene's scale_mat")
+        b = d_world @ o
+        c = float(o @ o - radius**2)
+        t_far = -b + np.sqrt(np.maximum(b * b - c, 0.0))
+        origins.append(o)
+        dirs.append(d_world)
+        zf.append(1.0 / norm)
+        far.append(t_far)
+        rots.append(c2w[:3, :3].T)
+    f32 = lambda a: torch.from_numpy(np.asarray(a, dtype=np.float32))  # noqa: E731
+    return RayBundle(f32(np.stack(origins)), f32(np.stack(dirs)), f32(np.stack(zf)), f32(np.stack(far)), f32(np.stack(rots)), scale)

@@ -1,0 +1,219 @@
+"""MonoSDF training on a Scene: one image x ``rays_per_batch`` rays per step (MonoSDF's batching),
+colour L1 + eikonal + scale-and-shift-invariant depth + normal (L1 + angular) losses, Adam with the
+grid at ``grid_lr_factor`` x the MLP learning rate and exponential decay to ``lr_decay`` x.
+
+Hooks used by MonoInstance (``methods/monoinstance``) without copying this loop:
+
+* ``prior_weight``: (V, H*W) per-pixel weights of the depth/normal losses (all 1 for MonoSDF);
+* ``pixel_sampler``: ``(view, n, generator) -> (n,) pixel indices`` (uniform for MonoSDF);
+* ``extra_losses``: callables ``(trainer, view, pixels, render_output) -> {name: (weight, loss)}``.
+
+Checkpoints hold the networks, the optimiser, the step and the random-generator state, so a resumed
+run continues exactly where it stopped.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import torch
+import trimesh
+
+from bench.scene import Scene
+from methods.monosdf.field import ColorNetwork, LaplaceDensity, SDFNetwork
+from methods.monosdf.grid import make_grid_spec
+from methods.monosdf.losses import color_loss, eikonal_loss, normal_loss, ssi_depth_loss
+from methods.monosdf.rays import build_rays, normalisation
+from methods.monosdf.render import RenderOutput, render_depth, render_rays
+
+PixelSampler = Callable[[int, int, torch.Generator], torch.Tensor]
+
+
+class MonoSDFTrainer:
+    """Holds the scene's training data, the networks and the optimiser."""
+
+    def __init__(self, scene: Scene, cfg: dict[str, Any], seed: int) -> None:
+        self.scene, self.cfg, self.seed = scene, cfg, seed
+        torch.manual_seed(seed)
+        self.gen = torch.Generator().manual_seed(seed)
+        self.views = scene.view_indices("train")
+        self.radius = float(cfg["bounding_sphere"])
+        self.rays = build_rays(scene, self.views, self.radius)
+        V, HW = len(self.views), scene.height * scene.width
+        self.rgb = torch.from_numpy(scene.images[self.views].reshape(V, HW, 3).astype(np.float32))
+        self.prior_depth = self._prior(scene.mono_depth, (V, HW))
+        self.prior_normal = self._prior(scene.mono_normal, (V, HW, 3))
+        self.prior_weight = torch.ones(V, HW)
+        self.pixel_sampler: PixelSampler = lambda v, n, g: torch.randint(0, HW, (n,), generator=g)  # noqa: E731
+        self.extra_losses: list[Callable[..., dict[str, tuple[float, torch.Tensor]]]] = []
+
+        spec = make_grid_spec(cfg["grid_levels"], cfg["grid_features"], cfg["grid_log2_table"], cfg["grid_base_res"], cfg["grid_max_res"])
+        self.sdf = SDFNetwork(spec, hidden=cfg["mlp_hidden"], layers=cfg["mlp_layers"], geo_features=cfg["geo_features"],
+                              radius=self.radius, init_radius=cfg["init_radius"], inside_out=cfg["inside_out"],
+                              fast_grid=cfg["fast_grid"], seed=seed)
+        self.color = ColorNetwork(cfg["geo_features"], cfg["color_hidden"], cfg["color_layers"])
+        self.density = LaplaceDensity(cfg["beta_init"], cfg["beta_min"])
+        lr = float(cfg["lr"])
+        mlp_params = [p for n, p in self.sdf.named_parameters() if not n.startswith("grid.")]
+        self.optim = torch.optim.Adam([
+            {"params": [self.sdf.grid.table], "lr": lr * cfg["grid_lr_factor"]},
+            {"params": mlp_params + list(self.color.parameters()) + list(self.density.parameters()), "lr": lr},
+        ], betas=(0.9, 0.99), eps=1e-15)
+        self.base_lrs = [g["lr"] for g in self.optim.param_groups]
+        self.step_count = 0
+
+    def _prior(self, arr: np.ndarray | None, shape: tuple[int, ...]) -> torch.Tensor | None:
+        if arr is None:
+            return None
+        return torch.from_numpy(np.ascontiguousarray(arr[self.views]).reshape(shape).astype(np.float32))
+
+    # ------------------------------------------------------------------ one step
+    def render_pixels(self, view: int, pixels: torch.Tensor, jitter: bool = True) -> RenderOutput:
+        """Render ``pixels`` (flat indices) of training view slot ``view`` (0..V-1)."""
+        r = self.rays
+        return render_rays(self.sdf, self.color, self.density, r.origins[view], r.dirs[view, pixels], r.z_factor[view, pixels],
+                           r.far[view, pixels], r.world_to_cam_rot[view], self.cfg["near"], self.cfg["n_coarse"], self.cfg["n_fine"],
+                           self.gen, jitter)
+
+    def _set_lr(self) -> None:
+        frac = min(self.step_count / max(int(self.cfg["iterations"]), 1), 1.0)
+        decay = float(self.cfg["lr_decay"]) ** frac
+        for g, base in zip(self.optim.param_groups, self.base_lrs):
+            g["lr"] = base * decay
+
+    def step(self, view: int | None = None) -> dict[str, float]:
+        """One optimisation step on training slot ``view`` (random when None); returns the loss terms."""
+        cfg = self.cfg
+        if view is None:
+            view = int(torch.randint(0, len(self.views), (1,), generator=self.gen))
+        pixels = self.pixel_sampler(view, int(cfg["rays_per_batch"]), self.gen)
+        out = self.render_pixels(view, pixels)
+        terms: dict[str, tuple[float, torch.Tensor]] = {"color": (float(cfg["color_weight"]), color_loss(out.rgb, self.rgb[view, pixels]))}
+
+        # eikonal: uniform points in the bounding cube + the highest-weight sample of each ray (MonoSDF)
+        n_uni = int(cfg["rays_per_batch"])
+        uni = (torch.rand(n_uni, 3, generator=self.gen) * 2 - 1) * self.radius
+        _, _, g_uni = self.sdf(uni, with_gradient=True)
+        best = out.weights.detach().argmax(-1)
+        g_surf = out.grad[torch.arange(out.grad.shape[0]), best]
+        terms["eikonal"] = (float(cfg["eikonal_weight"]), eikonal_loss(torch.cat([g_uni, g_surf])))
+
+        w = self.prior_weight[view, pixels]
+        if self.prior_depth is not None and cfg["depth_weight"] > 0:
+            terms["depth"] = (float(cfg["depth_weight"]), ssi_depth_loss(out.depth, self.prior_depth[view, pixels], w))
+        if self.prior_normal is not None and cfg["normal_weight"] > 0:
+            l1, ang = normal_loss(out.normal, self.prior_normal[view, pixels], w)
+            terms["normal_l1"] = (float(cfg["normal_weight"]), l1)
+            terms["normal_cos"] = (float(cfg["normal_weight"]), ang)
+        for extra in self.extra_losses:
+            terms.update(extra(self, view, pixels, out))
+
+        loss = sum(wt * val for wt, val in terms.values())
+        self._set_lr()
+        self.optim.zero_grad(set_to_none=True)
+        loss.backward()
+        self.optim.step()
+        self.step_count += 1
+        logs = {k: float(v.detach()) for k, (_, v) in terms.items()}
+        logs["loss"] = float(loss.detach())
+        logs["beta"] = float(self.density.beta().detach())
+        return logs
+
+    # ------------------------------------------------------------------ outputs
+    @torch.no_grad()
+    def sdf_on_grid(self, resolution: int, chunk: int = 262144) -> tuple[np.ndarray, np.ndarray, float]:
+        """SDF on a resolution^3 grid over the cube [-R, R]^3 -> (values (n, n, n), origin (3,), spacing)."""
+        n = int(resolution)
+        lin = torch.linspace(-self.radius, self.radius, n)
+        vals = torch.empty(n, n, n)
+        for i in range(n):
+            xx, yy = torch.meshgrid(lin, lin, indexing="ij")
+            pts = torch.stack([torch.full_like(xx, float(lin[i])), xx, yy], -1).reshape(-1, 3)
+            out = [self.sdf(pts[s : s + chunk], with_gradient=False)[0] for s in range(0, len(pts), chunk)]
+            vals[i] = torch.cat(out).reshape(n, n)
+        return vals.numpy(), np.full(3, -self.radius), float(2 * self.radius / (n - 1))
+
+    def extract_mesh(self, resolution: int) -> trimesh.Trimesh:
+        """Marching cubes (scikit-image) of the zero level set, in WORLD metres."""
+        from skimage.measure import marching_cubes
+
+        vals, origin, spacing = self.sdf_on_grid(resolution)
+        if not (vals.min() < 0 < vals.max()):
+            return trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64), process=False)
+        verts, faces, _, _ = marching_cubes(vals, level=0.0, spacing=(spacing,) * 3)
+        verts = verts + origin
+        centre, scale = normalisation(self.scene)
+        return trimesh.Trimesh(verts * scale + centre, faces[:, ::-1].copy(), process=False)
+
+    @torch.no_grad()
+    def render_view_depth(self, view: int, stride: int = 1, chunk: int = 4096) -> np.ndarray:
+        """z-depth in metres of training slot ``view`` at every ``stride``-th pixel -> (ceil(H/stride), ceil(W/stride))."""
+        H, W = self.scene.height, self.scene.width
+        rows, cols = np.arange(0, H, stride), np.arange(0, W, stride)
+        pix = torch.from_numpy((rows[:, None] * W + cols[None, :]).reshape(-1))
+        r, depth = self.rays, []
+        for s in range(0, len(pix), chunk):
+            p = pix[s : s + chunk]
+            depth.append(render_depth(self.sdf, self.density, r.origins[view], r.dirs[view, p], r.z_factor[view, p], r.far[view, p],
+                                      self.cfg["near"], self.cfg["n_coarse"], self.cfg["n_fine"]))
+        return (torch.cat(depth) * r.scale).reshape(len(rows), len(cols)).numpy()
+
+    # ------------------------------------------------------------------ checkpoints
+    def state_dict(self) -> dict[str, Any]:
+        return {"sdf": self.sdf.state_dict(), "color": self.color.state_dict(), "density": self.density.state_dict(),
+                "optim": self.optim.state_dict(), "step": self.step_count, "gen": self.gen.get_state(), "cfg": self.cfg, "seed": self.seed}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.sdf.load_state_dict(state["sdf"])
+        self.color.load_state_dict(state["color"])
+        self.density.load_state_dict(state["density"])
+        self.optim.load_state_dict(state["optim"])
+        self.step_count = int(state["step"])
+        self.gen.set_state(state["gen"])
+
+    def save(self, path: str | Path) -> None:
+        """Write a checkpoint atomically."""
+        import io
+
+        from bench.atomic import atomic_write_bytes
+
+        buf = io.BytesIO()
+        torch.save(self.state_dict(), buf)
+        atomic_write_bytes(path, buf.getvalue())
+
+    def load(self, path: str | Path) -> None:
+        self.load_state_dict(torch.load(path, weights_only=False))
+
+
+def train_with_snapshots(
+    trainer: MonoSDFTrainer,
+    iterations: int,
+    fractions: list[float],
+    mesh_resolution: int,
+    progress: Callable[[float, str], None] | None = None,
+    start_seconds: float = 0.0,
+) -> tuple[list[dict[str, Any]], float, float]:
+    """Run ``trainer`` up to ``iterations`` steps, extracting a mesh at each fraction of the schedule.
+
+    Returns:
+        (snapshots as dicts {fraction, iterations, seconds, mesh}, train seconds, mesh seconds of the last).
+    """
+    marks = sorted({max(1, int(round(f * iterations))) for f in fractions})
+    snaps: list[dict[str, Any]] = []
+    train_s, mesh_s = 0.0, 0.0
+    it0 = trainer.step_count
+    for mark in marks:
+        t = time.perf_counter()
+        while trainer.step_count < mark:
+            logs = trainer.step()
+            if progress and trainer.step_count % 25 == 0:
+                progress(trainer.step_count / iterations, f"step {trainer.step_count}/{iterations} loss {logs['loss']:.4f} beta {logs['beta']:.4f}")
+        train_s += time.perf_counter() - t
+        t = time.perf_counter()
+        mesh = trainer.extract_mesh(mesh_resolution)
+        mesh_s = time.perf_counter() - t
+        snaps.append({"fraction": mark / iterations, "iterations": trainer.step_count - it0 + 0, "seconds": start_seconds + train_s + mesh_s, "mesh": mesh})
+    return snaps, train_s, mesh_s
