@@ -17,6 +17,7 @@ from __future__ import annotations
 import datetime as _dt
 import hashlib
 import json
+import math
 import os
 import platform
 import socket
@@ -46,6 +47,17 @@ class Job:
     plan: JobPlan
     config: dict[str, Any]
     job_id: str
+
+
+def method_metrics(extra: dict[str, Any]) -> dict[str, float]:
+    """Metrics a method reports about itself (``unc_*``: quality of its uncertainty maps against the
+    scene's GT, from the uncertainty stage), copied from ``Artifacts.extra`` into the row's metrics so
+    tables can show them and claims can use them."""
+    out = {}
+    for k, v in extra.items():
+        if k.startswith("unc_") and isinstance(v, (int, float)) and math.isfinite(float(v)):
+            out[k] = float(v)
+    return out
 
 
 def job_id_for(plan: JobPlan, config: dict[str, Any]) -> str:
@@ -141,8 +153,9 @@ def run_job(job: Job, cache_dir: Path = DEFAULT_CACHE, progress: Callable[[float
             metrics = evaluate_snapshot(snap, scene, plan.protocol, plan.scale, seed=plan.seed)
             curve.append({"fraction": snap.fraction, "iterations": snap.iterations, "seconds": snap.seconds, "metrics": metrics})
         timings["eval"] = (time.perf_counter() - t) / max(len(artifacts.snapshots), 1)
-        row.update(status="ok", error=None, metrics=curve[-1]["metrics"] if curve else {}, curve=curve,
-                   iterations=artifacts.iterations, extra=artifacts.extra)
+        final = dict(curve[-1]["metrics"]) if curve else {}
+        final.update(method_metrics(artifacts.extra))
+        row.update(status="ok", error=None, metrics=final, curve=curve, iterations=artifacts.iterations, extra=artifacts.extra)
     except Exception as exc:  # recorded in the row: the table marks it failed instead of dropping it
         row.update(status="failed", metrics={}, curve=[], iterations=0,
                    error={"type": type(exc).__name__, "message": str(exc), "traceback": traceback.format_exc()})

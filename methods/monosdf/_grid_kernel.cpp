@@ -146,13 +146,14 @@ std::vector<torch::Tensor> softplus_slope_forward(torch::Tensor z, double beta) 
     float* sp = s.data_ptr<float>();
     const float b = (float)beta, inv_b = 1.f / (float)beta;
     const int64_t n = zc.numel();
-#pragma omp parallel for schedule(static)
-    for (int64_t i = 0; i < n; ++i) {
-        const float bz = b * zp[i];
-        const float e = std::exp(-std::fabs(bz));  // in (0, 1]: no overflow for any z
+#pragma omp parallel for simd schedule(static)
+    for (int64_t i = 0; i < n; ++i) {  // branch-free so the loop vectorises (expf / logf from libmvec)
+        const float z = zp[i];
+        const float bz = b * z;
+        const float e = expf(-fabsf(bz));  // in (0, 1]: no overflow for any z
         const float inv = 1.f / (1.f + e);
         sp[i] = bz >= 0.f ? inv : e * inv;
-        ap[i] = (bz > 0.f ? zp[i] : 0.f) + std::log1p(e) * inv_b;
+        ap[i] = fmaxf(z, 0.f) + logf(1.f + e) * inv_b;
     }
     return {a, s};
 }

@@ -148,7 +148,7 @@ def _load_extension():
                 from torch.utils.cpp_extension import load
 
                 src = Path(__file__).with_name("_grid_kernel.cpp")
-                _EXT = load(name="monosdf_grid_kernel", sources=[str(src)], extra_cflags=["-O3", "-fopenmp", "-march=native"],
+                _EXT = load(name="monosdf_grid_kernel", sources=[str(src)], extra_cflags=["-O3", "-fopenmp", "-march=native", "-ffast-math"],
                             extra_ldflags=["-fopenmp"], verbose=os.environ.get("BENCH_VERBOSE_BUILD") == "1")
             except Exception as exc:  # no compiler / headers: use the reference path
                 import warnings
