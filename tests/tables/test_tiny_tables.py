@@ -17,7 +17,7 @@ def test_tiny_table_runs_end_to_end(table, tmp_path, capsys):
     rows = [json.loads(p.read_text()) for p in (out / "jobs").glob("*.json")]
     assert rows and all(r["status"] == "ok" for r in rows), [(r["row"], r.get("error", {}).get("message")) for r in rows if r["status"] != "ok"]
     md = (out / f"{table}.md").read_text()
-    assert "## Claims" in md and "failed" not in md.split("## Claims")[0].lower()
+    assert "## Claims" in md and f"{len(rows)} ok, 0 failed, 0 pending" in md
     assert (out / f"{table}_accuracy_vs_time.png").stat().st_size > 0
     for r in rows:  # every row carries its cost in time, per stage
         assert r["timings"]["total"] > 0 and r["curve"], r["row"]
