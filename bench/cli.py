@@ -36,6 +36,25 @@ def _table_path(name: str) -> Path:
     return path
 
 
+def table_status(spec, available: set[str]) -> str:
+    """"ready", or what keeps the table from running: missing methods, an unsupported evaluation
+    protocol, or row/group overrides a method's config does not have."""
+    from bench.evaluate import SUPPORTED_PROTOCOLS
+    from methods.registry import method_config
+
+    problems = sorted({f"method {r.method}" for r in spec.rows if r.method not in available})
+    problems += sorted({f"protocol {g.protocol}" for g in spec.groups if g.protocol not in SUPPORTED_PROTOCOLS})
+    for r in spec.rows:
+        for g in spec.groups:
+            if r.method in available:
+                try:
+                    method_config(r.method, spec.scales[0], {**g.overrides, **r.overrides})
+                except BenchInputError as exc:
+                    problems.append(f"config of {r.method!r}: {exc.problem.split(' (keys')[0]}")
+    problems = list(dict.fromkeys(problems))
+    return "ready" if not problems else "pending: " + "; ".join(problems[:3]) + (" ..." if len(problems) > 3 else "")
+
+
 def cmd_list(args: argparse.Namespace) -> int:
     from bench.tables import list_tables, load_table_spec
     from methods.registry import available_methods
@@ -47,8 +66,7 @@ def cmd_list(args: argparse.Namespace) -> int:
     avail = set(available_methods())
     for t in list_tables(TABLES_DIR):
         spec = load_table_spec(TABLES_DIR / f"{t}.yaml")
-        missing = sorted({r.method for r in spec.rows if r.method not in avail})
-        status = "ready" if not missing else f"pending methods: {', '.join(missing)}"
+        status = table_status(spec, avail)
         print(f"  {t:10s} {spec.title}  [{status}]")
     print("scenes:")
     from bench.synth.recipe import load_recipe

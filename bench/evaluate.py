@@ -18,6 +18,7 @@ from bench.scene import Scene
 from methods.base import Snapshot
 
 PROTOCOLS_FILE = Path(__file__).resolve().parent.parent / "configs" / "protocols.yaml"
+SUPPORTED_PROTOCOLS = ("scannet", "replica", "llff")
 MESH_KEYS = {"accuracy": "acc", "completion": "comp", "chamfer": "cd", "precision": "prec", "recall": "recall", "fscore": "fscore", "normal_consistency": "nc"}
 
 
@@ -82,4 +83,4 @@ def evaluate_snapshot(snapshot: Snapshot, scene: Scene, protocol: str, scale: st
 
         test = scene.view_indices("test")
         return {"psnr": float(psnr(snapshot.renders, scene.images[test]).mean), "ssim": float(ssim(snapshot.renders, scene.images[test]).mean)}
-    raise BenchInputError(f"protocol {protocol!r}", "not supported by the evaluator yet (scannet, replica, llff)")
+    raise BenchInputError(f"protocol {protocol!r}", f"not supported by the evaluator yet {SUPPORTED_PROTOCOLS}")

@@ -76,7 +76,7 @@ def test_geometric_init_is_a_sphere_and_clamp_holds():
     sdf, _, grad = net(x)
     vals = sdf.detach().numpy()  # inside-out: positive inside; with 64-wide layers IDR's init is a sphere only roughly
     assert abs(vals.mean() - (0.6 - 0.3)) < 0.1 and vals.min() > 0.0
-    assert abs(float(grad.norm(dim=-1).mean()) - 1) < 0.3
+    assert abs(float(grad.detach().norm(dim=-1).mean()) - 1) < 0.3
     far = torch.nn.functional.normalize(torch.randn(50, 3), dim=-1) * 0.999
     assert (net(far)[0] <= 1e-3 + 1e-6).all()  # clamped by R - |x|
 
