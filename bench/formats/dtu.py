@@ -126,22 +126,4 @@ def load(root: Path, fmt: str = "dtu", train_views: Sequence[int] | None = None)
     prefixes = tuple(f"{i:06d}" for i in range(n))
     maps = extras.read_view_maps(extras.Layout(root, prefixes, flat=False), hw)
     side = extras.read_side_files(root)
-    kwargs: dict[str, Any] = dict(
-        name=root.name,
-        kind="object",
-        source_format="dtu",
-        images=images,
-        intrinsics=K,
-        cam_to_world=c2w,
-        scale_mat=scale_mat,
-        seg_background=side.seg_background,
-        instances=side.instances,
-        gt_mesh_path=side.gt_mesh_path,
-        splits=default_splits(n, train_views),
-        root=root,
-        **maps,
-    )
-    extras.apply_meta(kwargs, side, root, "dtu")
-    scene = Scene(**kwargs)
-    scene.validate()
-    return scene
+    return extras.build_scene(root, "dtu", "object", images, K, c2w, scale_mat, maps, side, splits=default_splits(n, train_views))

@@ -228,6 +228,26 @@ def meta_scale_mat(meta: dict[str, Any], where: Path) -> np.ndarray | None:
     return sm
 
 
+def build_scene(root: Path, fmt: str, kind: str, images: np.ndarray, K: np.ndarray, c2w: np.ndarray, scale_mat: np.ndarray,
+                maps: dict[str, Any], side: SideFiles, splits: dict[str, np.ndarray] | None = None,
+                metadata_extra: dict[str, Any] | None = None) -> "Scene":
+    """The one place every loader turns what it read into a validated :class:`Scene`: the format's own
+    arrays, our optional per-view maps and side files, then meta.json (name / kind / splits / metadata)."""
+    from bench.scene import Scene
+
+    kwargs: dict[str, Any] = dict(name=root.name, kind=kind, source_format=fmt, images=images, intrinsics=K, cam_to_world=c2w,
+                                  scale_mat=scale_mat, seg_background=side.seg_background, instances=side.instances,
+                                  gt_mesh_path=side.gt_mesh_path, root=root, metadata={}, **maps)
+    if splits is not None:
+        kwargs["splits"] = splits
+    apply_meta(kwargs, side, root, fmt)
+    if metadata_extra:
+        kwargs["metadata"] = dict(kwargs["metadata"], **metadata_extra)
+    scene = Scene(**kwargs)
+    scene.validate()
+    return scene
+
+
 def apply_meta(scene_kwargs: dict[str, Any], side: SideFiles, root: Path, fmt: str) -> None:
     """Fill name / kind / splits / metadata from meta.json (if present) into Scene keyword arguments."""
     meta = side.meta

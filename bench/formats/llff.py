@@ -254,24 +254,5 @@ def load(root: Path, fmt: str = "llff", factor: int = 1) -> Scene:
     scale_mat = extras.meta_scale_mat(side.meta, root / extras.META_FILE) if side.meta else None
     if scale_mat is None:
         scale_mat = default_scale_mat(K, c2w, bounds, hw)
-    kwargs: dict[str, Any] = dict(
-        name=root.name,
-        kind="forward",
-        source_format="llff",
-        images=images,
-        intrinsics=K,
-        cam_to_world=c2w,
-        scale_mat=scale_mat,
-        seg_background=side.seg_background,
-        instances=side.instances,
-        gt_mesh_path=side.gt_mesh_path,
-        splits=default_splits(n),
-        root=root,
-        **maps,
-    )
-    kwargs["metadata"] = {}
-    extras.apply_meta(kwargs, side, root, "llff")
-    kwargs["metadata"] = dict(kwargs["metadata"], llff_factor=factor, llff_bounds=bounds.tolist())
-    scene = Scene(**kwargs)
-    scene.validate()
-    return scene
+    return extras.build_scene(root, "llff", "forward", images, K, c2w, scale_mat, maps, side, splits=default_splits(n),
+                              metadata_extra={"llff_factor": factor, "llff_bounds": bounds.tolist()})

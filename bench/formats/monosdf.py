@@ -123,21 +123,4 @@ def load(root: Path, fmt: str) -> Scene:
                 maps["mono_depth"][i][~(mask > 0)] = 0.0
 
     side = extras.read_side_files(root)
-    kwargs: dict[str, Any] = dict(
-        name=root.name,
-        kind="room",
-        source_format=fmt,
-        images=images,
-        intrinsics=K,
-        cam_to_world=c2w,
-        scale_mat=scale_mat,
-        seg_background=side.seg_background,
-        instances=side.instances,
-        gt_mesh_path=side.gt_mesh_path,
-        root=root,
-        **maps,
-    )
-    extras.apply_meta(kwargs, side, root, fmt)
-    scene = Scene(**kwargs)
-    scene.validate()
-    return scene
+    return extras.build_scene(root, fmt, "room", images, K, c2w, scale_mat, maps, side)
