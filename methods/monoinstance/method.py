@@ -24,12 +24,12 @@ import numpy as np
 import torch
 
 from bench.scene import Scene
-from methods.base import Artifacts, ProgressFn, Snapshot
+from methods.base import Artifacts, ProgressFn
 from methods.monoinstance.mask_constraint import MaskConstraint
 from methods.monoinstance.sampling import GuidedSampler
 from methods.monoinstance.stage import run_uncertainty_stage
 from methods.monosdf.method import set_threads
-from methods.monosdf.trainer import MonoSDFTrainer
+from methods.monosdf.trainer import MonoSDFTrainer, train_with_snapshots
 from methods.registry import register
 
 
@@ -44,6 +44,11 @@ def certainty_weights(uncertainty: np.ndarray, instance_ids: np.ndarray, is_back
     return c
 
 
+def _chain(*fns):
+    """One event callback running ``fns`` in order."""
+    return lambda: [f() for f in fns]
+
+
 @register("monoinstance")
 class MonoInstance:
     """MonoSDF + MonoInstance's uncertainty modules (each switchable by config)."""
@@ -56,39 +61,24 @@ class MonoInstance:
         trainer = MonoSDFTrainer(scene, config, seed)
         timings = {"setup": time.perf_counter() - t_start}
         total = int(config["iterations"])
-        marks = sorted({max(1, int(round(f * total))) for f in config["fractions"]})
         modules_on = bool(config["uncertainty"] or config["guided_sampling"] or config["mask_constraint"])
-        stage1_end = max(1, int(round(float(config["stage1_fraction"]) * total))) if modules_on else total
-        final_start = total - int(round(float(config["final_phase_fraction"]) * total))
-        snapshots: list[Snapshot] = []
         extra: dict[str, Any] = {}
-        train_s = mesh_s = 0.0
-        uncertainty: np.ndarray | None = None
-        mask_loss: MaskConstraint | None = None
-
-        def run_until(step: int) -> None:
-            nonlocal train_s
-            t = time.perf_counter()
-            while trainer.step_count < step:
-                if modules_on and trainer.step_count == final_start and final_start < total:  # code-only final phase
+        stage: dict[str, np.ndarray] = {}
+        events = {}
+        if modules_on:
+            stage1_end = max(1, int(round(float(config["stage1_fraction"]) * total)))
+            events[stage1_end] = lambda: stage.update(U=self._between_stages(trainer, scene, config, seed, timings, extra))
+            final_start = total - int(round(float(config["final_phase_fraction"]) * total))
+            if final_start < total:  # code-only final phase: no mask constraint, depth 0.1, normal 0.005
+                def final_phase() -> None:
                     trainer.extra_losses.clear()
                     trainer.cfg = {**trainer.cfg, "depth_weight": 0.1, "normal_weight": 0.005}
-                logs = trainer.step()
-                if progress and trainer.step_count % 25 == 0:
-                    progress(trainer.step_count / total, f"step {trainer.step_count}/{total} loss {logs['loss']:.4f}")
-            train_s += time.perf_counter() - t
 
-        for mark in sorted(set(marks) | {stage1_end}):
-            run_until(mark)
-            if mark == stage1_end and modules_on:
-                uncertainty, mask_loss = self._between_stages(trainer, scene, config, seed, timings, extra)
-            if mark in marks:
-                t = time.perf_counter()
-                mesh = trainer.extract_mesh(int(config["mesh_resolution"]))
-                mesh_s = time.perf_counter() - t
-                elapsed = time.perf_counter() - t_start
-                snapshots.append(Snapshot(mark / total, trainer.step_count, elapsed, mesh=mesh))
+                events[max(final_start, stage1_end)] = final_phase if final_start > stage1_end else _chain(events[stage1_end], final_phase)
+        snapshots, train_s, mesh_s = train_with_snapshots(trainer, total, list(config["fractions"]), int(config["mesh_resolution"]),
+                                                          progress, start_seconds=timings["setup"], events=events)
         timings.update(train=train_s, mesh=mesh_s)
+        uncertainty = stage.get("U")
         extra["beta"] = float(trainer.density.beta().detach())
         full_u = None
         if uncertainty is not None:
@@ -98,7 +88,7 @@ class MonoInstance:
 
     @staticmethod
     def _between_stages(trainer: MonoSDFTrainer, scene: Scene, config: dict[str, Any], seed: int,
-                        timings: dict[str, float], extra: dict[str, Any]) -> tuple[np.ndarray, MaskConstraint | None]:
+                        timings: dict[str, float], extra: dict[str, Any]) -> np.ndarray:
         """Render the reference depth, run the uncertainty stage, switch on the stage-2 modules."""
         stage_cfg = dict(config["uncertainty_stage"] or {})
         f = int(stage_cfg.get("ref_depth_downscale", 4))
@@ -119,8 +109,6 @@ class MonoInstance:
             trainer.prior_weight = torch.from_numpy(c.reshape(len(views), -1))
         if config["guided_sampling"]:
             trainer.pixel_sampler = GuidedSampler(ids, result.is_background, U, prob_offset=float(config["sampling_prob_offset"]))
-        mask_loss = None
         if config["mask_constraint"]:
-            mask_loss = MaskConstraint(trainer, ids, result.is_background, c <= 0, config)
-            trainer.extra_losses.append(mask_loss)
-        return U, mask_loss
+            trainer.extra_losses.append(MaskConstraint(trainer, ids, result.is_background, c <= 0, config))
+        return U

@@ -10,7 +10,7 @@ import time
 from typing import Any
 
 from bench.scene import Scene
-from methods.base import Artifacts, ProgressFn, Snapshot
+from methods.base import Artifacts, ProgressFn
 from methods.monosdf.trainer import MonoSDFTrainer, train_with_snapshots
 from methods.registry import register
 
@@ -37,7 +37,7 @@ class MonoSDF:
         snaps, train_s, mesh_s = train_with_snapshots(trainer, int(config["iterations"]), list(config["fractions"]),
                                                       int(config["mesh_resolution"]), progress, start_seconds=setup_s)
         return Artifacts(
-            snapshots=[Snapshot(s["fraction"], s["iterations"], s["seconds"], mesh=s["mesh"]) for s in snaps],
+            snapshots=snaps,
             timings={"setup": setup_s, "train": train_s, "mesh": mesh_s},
             iterations=trainer.step_count,
             extra={"beta": float(trainer.density.beta().detach()), "samples_per_ray": int(config["n_coarse"]) + int(config["n_fine"])},

@@ -23,6 +23,7 @@ import torch
 import trimesh
 
 from bench.scene import Scene
+from methods.base import Snapshot
 from methods.monosdf.field import ColorNetwork, LaplaceDensity, SDFNetwork
 from methods.monosdf.grid import make_grid_spec
 from methods.monosdf.losses import color_loss, eikonal_loss, normal_loss, ssi_depth_loss
@@ -195,25 +196,38 @@ def train_with_snapshots(
     mesh_resolution: int,
     progress: Callable[[float, str], None] | None = None,
     start_seconds: float = 0.0,
-) -> tuple[list[dict[str, Any]], float, float]:
+    events: dict[int, Callable[[], None]] | None = None,
+) -> tuple[list[Snapshot], float, float]:
     """Run ``trainer`` up to ``iterations`` steps, extracting a mesh at each fraction of the schedule.
 
+    Args:
+        events: ``{step: callback}`` run when the step count reaches ``step`` (before the snapshot of
+            that step, if any): MonoInstance's between-stage work and phase switches. Their wall time
+            counts towards the snapshots' seconds, not towards the returned train seconds.
+
     Returns:
-        (snapshots as dicts {fraction, iterations, seconds, mesh}, train seconds, mesh seconds of the last).
+        (snapshots; seconds = start_seconds + training + events so far + this snapshot's mesh extraction,
+        earlier extractions excluded), train seconds, mesh seconds of the last snapshot.
     """
+    events = dict(events or {})
     marks = sorted({max(1, int(round(f * iterations))) for f in fractions})
-    snaps: list[dict[str, Any]] = []
-    train_s, mesh_s = 0.0, 0.0
+    snaps: list[Snapshot] = []
+    train_s = event_s = mesh_s = 0.0
     it0 = trainer.step_count
-    for mark in marks:
+    for stop in sorted(set(marks) | {k for k in events if 0 <= k <= iterations}):
         t = time.perf_counter()
-        while trainer.step_count < mark:
+        while trainer.step_count < stop:
             logs = trainer.step()
             if progress and trainer.step_count % 25 == 0:
                 progress(trainer.step_count / iterations, f"step {trainer.step_count}/{iterations} loss {logs['loss']:.4f} beta {logs['beta']:.4f}")
         train_s += time.perf_counter() - t
-        t = time.perf_counter()
-        mesh = trainer.extract_mesh(mesh_resolution)
-        mesh_s = time.perf_counter() - t
-        snaps.append({"fraction": mark / iterations, "iterations": trainer.step_count - it0 + 0, "seconds": start_seconds + train_s + mesh_s, "mesh": mesh})
+        if stop in events:
+            t = time.perf_counter()
+            events[stop]()
+            event_s += time.perf_counter() - t
+        if stop in marks:
+            t = time.perf_counter()
+            mesh = trainer.extract_mesh(mesh_resolution)
+            mesh_s = time.perf_counter() - t
+            snaps.append(Snapshot(stop / iterations, trainer.step_count - it0, start_seconds + train_s + event_s + mesh_s, mesh=mesh))
     return snaps, train_s, mesh_s
