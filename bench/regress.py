@@ -12,6 +12,10 @@ Reference file (written only with ``--update-reference``, refused when a job fai
      "cells": {"<row label>": {"<group id>": {"<metric>": {"mean": .., "std": .., "n": .., "n_expected": ..,
                                                          "direction": "lower", "unit": "m"}}}}}
 
+Extra metrics of a group (``extra_metrics``: e.g. the uncertainty stage's ``unc_mean_thin``, which only
+a row with the uncertainty module produces) have no direction: they are tracked for presence only, so a
+module that stops running (its metric disappears) is ``missing`` and fails the run.
+
 Verdict per cell, with ``tol = max(floor[metric], k * std_ref)`` (``std_ref``: the seed-to-seed
 spread stored in the reference; 0 with one seed) and ``worse = new - ref`` for "lower is better"
 (``ref - new`` for "higher"):
@@ -112,16 +116,16 @@ def summarise(spec: TableSpec, report, rows: Iterable[str] | None = None) -> dic
         if keep is not None and r.label not in keep:
             continue
         for g in spec.groups:
-            for c in g.columns:
-                if c.paper_only:
-                    continue
-                cell = report.cells.get((r.label, g.id, c.key))
+            tracked = [(c.key, c.direction, c.unit) for c in g.columns if not c.paper_only]
+            tracked += [(key, None, "") for key in g.extra_metrics]  # presence only (no direction)
+            for key, direction, unit in tracked:
+                cell = report.cells.get((r.label, g.id, key))
                 if cell is None or cell.status in ("not_implemented", "not_reported"):
                     continue  # no results expected / the method does not produce this metric
-                cells.setdefault(r.label, {}).setdefault(g.id, {})[c.key] = {
+                cells.setdefault(r.label, {}).setdefault(g.id, {})[key] = {
                     "mean": _num(cell.mean), "std": _num(cell.std), "n": int(cell.n),
                     "n_expected": int(cell.n_expected), "n_failed": int(cell.n_failed),
-                    "status": cell.status, "direction": c.direction, "unit": c.unit}
+                    "status": cell.status, "direction": direction, "unit": unit}
     return cells
 
 
@@ -179,9 +183,13 @@ def compare(reference: dict[str, Any], current: dict[str, Any], pending_rows: It
                     out.append(Finding(**base, verdict="missing",
                                        note=f"{cur.get('n', 0)}/{cur.get('n_expected', '?')} results ({cur.get('status')})"))
                     continue
+                direction = ref.get("direction", cur.get("direction"))
+                if direction is None:  # an extra metric (e.g. a module's own output): tracked for presence
+                    out.append(Finding(**base, verdict="ok", note=f"present (extra metric, no direction; was {_f(rm)})"))
+                    continue
                 floor = float(floors.get(metric, floor_for(metric, ref.get("unit", ""))))
                 tol = max(floor, k * (rs or 0.0))
-                worse = (nm - rm) if ref.get("direction", cur.get("direction")) == "lower" else (rm - nm)
+                worse = (nm - rm) if direction == "lower" else (rm - nm)
                 verdict: Verdict = "regressed" if worse > tol else ("improved" if -worse > tol else "ok")
                 out.append(Finding(**base, verdict=verdict, tol=tol,
                                    note=f"{'worse' if worse > 0 else 'better'} by {abs(worse):.4g} (tolerance {tol:.4g})"))
