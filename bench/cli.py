@@ -151,7 +151,14 @@ def _executor(args: argparse.Namespace):
         raise BenchInputError("--retries", f"must be >= 0, got {args.retries}")
     if args.scheduler is not None and args.executor != "dask":
         raise BenchInputError("--scheduler", "only with --executor dask")
-    return make_executor(args.executor, workers=args.workers, scheduler=args.scheduler, retries=args.retries)
+    workers = args.workers
+    if workers is None and args.executor == "local":
+        from bench.executors.base import available_cores
+
+        # one single-threaded job per core: 2 x 1-thread MonoSDF jobs do 0.67 M samples/s in total,
+        # one 2-thread job 0.53 M (benchmarks/bench_monosdf_step.py, README "Measured speed")
+        workers = available_cores()
+    return make_executor(args.executor, workers=workers, scheduler=args.scheduler, retries=args.retries)
 
 
 def _add_executor_flags(p: argparse.ArgumentParser) -> None:
@@ -160,7 +167,8 @@ def _add_executor_flags(p: argparse.ArgumentParser) -> None:
     p.add_argument("--executor", default="local", choices=EXECUTORS,
                    help="where jobs run: local processes (default) or a Dask cluster (docs/scale-out.md)")
     p.add_argument("--workers", type=int, default=None,
-                   help="local: parallel worker processes (default 1: in this process); "
+                   help="local: parallel worker processes, one torch thread each when workers = cores "
+                        "(default: one per core; 1 runs the jobs in this process); "
                         "dask without --scheduler: size of a local cluster (default 2)")
     p.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
                    help="dask: address of a running scheduler (default: start a local cluster)")

@@ -40,7 +40,7 @@ def _mesh_metrics(result: Any) -> dict[str, float]:
     return {k: v for k, v in out.items() if np.isfinite(v)}
 
 
-_GT_CACHE: dict[tuple, Any] = {}
+_GT_CACHE: dict[tuple, Any] = {}  # GT-side work per scene: identical for every snapshot of a job
 
 
 def _refused_gt(scene: Scene, views: np.ndarray, params: dict[str, Any]) -> Any:
@@ -52,6 +52,19 @@ def _refused_gt(scene: Scene, views: np.ndarray, params: dict[str, Any]) -> Any:
             _GT_CACHE.clear()
         _GT_CACHE[key] = tsdf_refuse(scene.load_gt_mesh(), scene.intrinsics[views], scene.cam_to_world[views], scene.height, scene.width,
                                      voxel_size=params["tsdf_voxel"], sdf_trunc=params["tsdf_trunc"], depth_trunc=params["depth_trunc"])
+    return _GT_CACHE[key]
+
+
+def _replica_gt(scene: Scene, views: np.ndarray, params: dict[str, Any], seed: int) -> Any:
+    from metrics.protocols import prepare_replica_gt
+
+    key = ("replica", str(scene.root or scene.name), tuple(int(v) for v in views), tuple(sorted(params.items())), seed)
+    if key not in _GT_CACHE:
+        if len(_GT_CACHE) > 4:
+            _GT_CACHE.clear()
+        gt_params = {k: v for k, v in params.items() if k != "threshold"}
+        _GT_CACHE[key] = prepare_replica_gt(scene.load_gt_mesh(), scene.intrinsics[views], scene.cam_to_world[views],
+                                            scene.height, scene.width, seed=seed, **gt_params)
     return _GT_CACHE[key]
 
 
@@ -77,7 +90,8 @@ def evaluate_snapshot(snapshot: Snapshot, scene: Scene, protocol: str, scale: st
         if protocol == "scannet":
             gt = _refused_gt(scene, views, params)
             return _mesh_metrics(evaluate_mesh_scannet(snapshot.mesh, gt, *cams, refuse_gt=False, **params))
-        return _mesh_metrics(evaluate_mesh_replica(snapshot.mesh, scene.load_gt_mesh(), *cams, seed=seed, **params))
+        prepared = _replica_gt(scene, views, params, seed)
+        return _mesh_metrics(evaluate_mesh_replica(snapshot.mesh, None, *cams, seed=seed, prepared_gt=prepared, **params))
     if protocol == "llff":
         from metrics.image import psnr, ssim
 

@@ -34,13 +34,25 @@ from metrics.mesh import clean_mesh
 
 
 def _world_to_cam(points: np.ndarray, c2w: np.ndarray) -> np.ndarray:
-    """(P, 3) world -> (N, P, 3) camera coordinates for N cameras."""
+    """(P, 3) world -> (N, P, 3) camera coordinates for N cameras: ``R_n^T (x - t_n)``.
+
+    One (P, 3) x (3, 3N) matrix product for all cameras (an ``einsum`` over the broadcast (N, P, 3)
+    difference took 2.5 s of a 6.5 s Replica evaluation); :func:`_world_to_cam_reference` is its
+    obviously-correct per-camera twin (tests compare them). Returns a (N, P, 3) view."""
     R = c2w[:, :3, :3]  # [N, 3, 3]
     t = c2w[:, :3, 3]  # [N, 3]
-    return np.einsum("nji,npj->npi", R, points[None] - t[:, None, :])  # R^T (x - t)
+    n = R.shape[0]
+    rotated = points @ R.transpose(1, 0, 2).reshape(3, 3 * n)  # [P, 3N]: x^T R_n for every n
+    offsets = np.einsum("nj,nji->ni", t, R)  # [N, 3]: t_n^T R_n
+    return (rotated.reshape(-1, n, 3) - offsets[None]).transpose(1, 0, 2)
 
 
-def _project(points: np.ndarray, K: np.ndarray, c2w: np.ndarray, chunk: int = 262144):
+def _world_to_cam_reference(points: np.ndarray, c2w: np.ndarray) -> np.ndarray:
+    """Slow twin of :func:`_world_to_cam`: one camera at a time, ``(x - t) R``."""
+    return np.stack([(points - c[:3, 3]) @ c[:3, :3] for c in c2w])
+
+
+def _project(points: np.ndarray, K: np.ndarray, c2w: np.ndarray, chunk: int = 8192):
     """Yield (slice, u, v, z) per chunk of points; u, v, z are (N, p) arrays."""
     for s in range(0, points.shape[0], chunk):
         pc = _world_to_cam(points[s : s + chunk], c2w)  # [N, p, 3]

@@ -12,7 +12,7 @@ from metrics.culling import (
     tsdf_refuse,
 )
 from metrics.dtu import DTUParams, dtu_chamfer, dtu_gt_points, radius_downsample, sample_mesh_dtu
-from metrics.protocols import evaluate_mesh_replica, evaluate_mesh_scannet
+from metrics.protocols import evaluate_mesh_replica, evaluate_mesh_scannet, prepare_replica_gt
 
 
 def test_frustum_test_and_depth_rendering_are_z_depth():
@@ -68,6 +68,19 @@ def test_replica_protocol_identical_and_shifted(ring_cameras):
         evaluate_mesh_replica(far, gt, K, c2w, H, W, n_samples=1000)
 
 
+def test_replica_prepared_gt_gives_identical_metrics(ring_cameras):
+    """The GT-side cache (prepare once, evaluate many snapshots) is exactly the one-shot protocol."""
+    K, c2w, H, W = ring_cameras
+    gt = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    pred = trimesh.creation.box(extents=(1.04, 1.0, 0.98))
+    for visibility in ("visible", "frustum"):
+        kw = dict(n_samples=20_000, gt_visibility=visibility, seed=3)
+        once = evaluate_mesh_replica(pred, gt, K, c2w, H, W, **kw).as_dict()
+        prepared = prepare_replica_gt(gt, K, c2w, H, W, **kw)
+        cached = evaluate_mesh_replica(pred, None, K, c2w, H, W, prepared_gt=prepared, **kw).as_dict()
+        assert once == cached
+
+
 def test_scannet_protocol(ring_cameras):
     K, c2w, H, W = ring_cameras
     gt = trimesh.creation.box((0.8, 0.8, 0.8))
@@ -113,3 +126,12 @@ def test_real_lamp_thin_structures(real_mesh, ring_cameras):
     lamp = trimesh.Trimesh(lamp.vertices - lamp.bounds.mean(0), lamp.faces, process=False)
     m = evaluate_mesh_replica(lamp, lamp, K, c2w, H, W, n_samples=20_000)
     assert m.fscore > 0.99 and m.chamfer < 0.01
+
+
+def test_world_to_cam_matches_its_per_camera_twin(ring_cameras):
+    from metrics.culling import _world_to_cam, _world_to_cam_reference
+
+    _, c2w, _, _ = ring_cameras
+    pts = np.random.default_rng(0).normal(size=(1000, 3))
+    np.testing.assert_allclose(_world_to_cam(pts, np.asarray(c2w, dtype=np.float64)),
+                               _world_to_cam_reference(pts, np.asarray(c2w, dtype=np.float64)), atol=1e-12)
