@@ -110,34 +110,42 @@ def select_plans(spec, plans: list, rows: list[str] | None, scenes: list[str] | 
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from bench.report import build_table, collect_results, write_table_outputs
-    from bench.runner import resolve_jobs, run_jobs
-    from bench.tables import load_table_spec, plan_jobs
+    """Plan every named table, run the union of their jobs once (a job several tables share, same id,
+    runs once and counts in each), then write each table's outputs; with several tables also one
+    ``report.md`` assembling them."""
+    from bench.report import build_table, collect_results, render_report, write_table_outputs
+    from bench.runner import plan_index, resolve_jobs, run_jobs, unique_jobs
+    from bench.tables import list_tables, load_table_spec, plan_jobs
     from methods.registry import available_methods
 
-    names = args.table
-    if names == ["all"]:
-        from bench.tables import list_tables
-
-        names = list_tables(TABLES_DIR)
+    names = list_tables(TABLES_DIR) if args.table == ["all"] else args.table
     out = Path(args.out) / args.scale
+    specs, jobs_by_table = [], {}
     for name in names:
         spec = load_table_spec(_table_path(name))
         plans = select_plans(spec, plan_jobs(spec, args.scale), args.rows, args.scenes, args.seeds)
         jobs, pending = resolve_jobs(plans)
         pending_methods = sorted({p.method for p in pending})
-        print(f"table {name}: {len(jobs)} jobs to run or reuse at scale {args.scale!r}"
+        print(f"table {name}: {len(jobs)} jobs at scale {args.scale!r}"
               + (f"; pending (not implemented yet): {', '.join(pending_methods)}" if pending_methods else ""))
-        with _executor(args) as executor:
-            run_jobs(jobs, out, force=args.force, show_progress=not args.quiet, executor=executor)
-        df = collect_results(out)
-        if args.scenes or args.seeds or args.rows:
-            keep = {j.job_id for j in jobs}
-            df = df[df["job_id"].isin(keep)]
-        report = build_table(spec, df, args.scale, available_methods())
-        paths = write_table_outputs(report, out)
-        _print_table_summary(paths["md"])
-        print(f"wrote {paths['csv']}, {paths['md']}, {paths['png']}")
+        specs.append(spec)
+        jobs_by_table[name] = jobs
+    every = [j for name in names for j in jobs_by_table[name]]
+    todo = unique_jobs(every)
+    if len(names) > 1:
+        print(f"{len(todo)} distinct jobs for {len(every)} table cells x seeds ({len(every) - len(todo)} shared between tables)")
+    with _executor(args) as executor:
+        run_jobs(todo, out, force=args.force, show_progress=not args.quiet, executor=executor)
+    df = collect_results(out)
+    plans_by_table = {name: plan_index(jobs) for name, jobs in jobs_by_table.items()}
+    if len(specs) > 1:
+        path = render_report(specs, df, args.scale, out, available_methods(), plans=plans_by_table)
+        print(f"wrote {path} (and each table's CSV, markdown and plot)")
+        return 0
+    report = build_table(specs[0], df, args.scale, available_methods(), plans=plans_by_table[specs[0].name])
+    paths = write_table_outputs(report, out)
+    _print_table_summary(paths["md"])
+    print(f"wrote {paths['csv']}, {paths['md']}, {paths['png']}")
     return 0
 
 
@@ -187,10 +195,14 @@ def cmd_report(args: argparse.Namespace) -> int:
     from bench.tables import list_tables, load_table_spec
     from methods.registry import available_methods
 
+    from bench.runner import plan_index, resolve_jobs
+    from bench.tables import plan_jobs
+
     out = Path(args.out) / args.scale
     names = args.table or list_tables(TABLES_DIR)
     specs = [load_table_spec(_table_path(n)) for n in names]
-    path = render_report(specs, collect_results(out), args.scale, out, available_methods())
+    plans = {s.name: plan_index(resolve_jobs(plan_jobs(s, args.scale))[0]) for s in specs}
+    path = render_report(specs, collect_results(out), args.scale, out, available_methods(), plans=plans)
     print(f"wrote {path}")
     return 0
 

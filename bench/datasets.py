@@ -1,7 +1,9 @@
 """Scene datasets used by jobs: synthesised on first use into a cache folder, then loaded.
 
-A job names a scene by its recipe name (``configs/scenes/<name>.yaml``). The dataset folder is keyed by
-recipe name, scale and a hash of the recipe file's content and the code version, so editing a recipe
+A job names a scene by its recipe name (``configs/scenes/<name>.yaml``) and optionally a scene variant
+(``effects``: ``{effect name: {parameter: value}}`` overriding the recipe's effects, e.g. another
+simulated prior profile). The dataset folder is keyed by recipe name, scale and a hash of the recipe
+file's content, the variant (when it changes anything) and the code version, so editing a recipe
 makes a new dataset and reruns reuse the cached one. Datasets are written atomically, so a crash never
 leaves a half-written cache entry.
 """
@@ -9,7 +11,9 @@ leaves a half-written cache entry.
 from __future__ import annotations
 
 import hashlib
+import json
 from pathlib import Path
+from typing import Any, Mapping
 
 from bench import __version__
 from bench.errors import BenchInputError
@@ -29,29 +33,41 @@ def recipe_path(scene_name: str, scenes_dir: Path = SCENES_DIR) -> Path:
     return path
 
 
-def recipe_hash(path: Path) -> str:
-    """Short hash of a recipe's bytes and the code version (changes when either changes)."""
-    return hashlib.sha256(path.read_bytes() + __version__.encode()).hexdigest()[:10]
+def recipe_hash(path: Path, effects: Mapping[str, Mapping[str, Any]] | None = None) -> str:
+    """Short hash of a recipe's bytes and the code version (changes when either changes), and of the
+    scene variant ``effects`` when it changes the recipe's effects (a no-op variant, e.g. the profile
+    the recipe already uses, hashes like the plain recipe: the same dataset, shared by every table)."""
+    data = path.read_bytes() + __version__.encode()
+    if effects:
+        from bench.synth.recipe import load_recipe, with_effect_overrides
+
+        recipe = load_recipe(path)
+        variant = with_effect_overrides(recipe, {k: dict(v) for k, v in effects.items()})
+        if variant.effects != recipe.effects:
+            data += json.dumps(variant.effects, sort_keys=True, default=str).encode()
+    return hashlib.sha256(data).hexdigest()[:10]
 
 
-def ensure_dataset(scene_name: str, scale: str, cache_dir: Path = DEFAULT_CACHE, scenes_dir: Path = SCENES_DIR) -> Path:
-    """Return the dataset folder of ``scene_name`` at ``scale``, synthesising it if not cached."""
+def ensure_dataset(scene_name: str, scale: str, cache_dir: Path = DEFAULT_CACHE, scenes_dir: Path = SCENES_DIR,
+                   effects: Mapping[str, Mapping[str, Any]] | None = None) -> Path:
+    """Return the dataset folder of ``scene_name`` (variant ``effects``) at ``scale``, synthesising it if not cached."""
     from bench.synth.make import make_dataset
 
     path = recipe_path(scene_name, scenes_dir)
-    out = Path(cache_dir) / f"{scene_name}-{scale}-{recipe_hash(path)}"
+    out = Path(cache_dir) / f"{scene_name}-{scale}-{recipe_hash(path, effects)}"
     if not out.exists():
-        make_dataset(path, out, scale=scale)
+        make_dataset(path, out, scale=scale, effect_overrides={k: dict(v) for k, v in (effects or {}).items()})
     return out
 
 
-def load_dataset(scene_name: str, scale: str, cache_dir: Path = DEFAULT_CACHE) -> Scene:
+def load_dataset(scene_name: str, scale: str, cache_dir: Path = DEFAULT_CACHE,
+                 effects: Mapping[str, Mapping[str, Any]] | None = None) -> Scene:
     """Synthesise (if needed) and load a scene; LLFF scenes load their ``images_N`` downsampled copy."""
     from bench.formats import load_scene
 
     from bench.synth.recipe import load_recipe
 
-    folder = ensure_dataset(scene_name, scale, cache_dir)
+    folder = ensure_dataset(scene_name, scale, cache_dir, effects=effects)
     recipe = load_recipe(recipe_path(scene_name))
     if recipe.format == "llff":  # the LLFF protocol trains and evaluates on images_N (FSGS: images_8)
         factors = recipe.get("llff", "factors", scale=scale, default=[2])

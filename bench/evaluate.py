@@ -2,7 +2,7 @@
 
 Metric keys produced (the table specs' column keys): ``acc``, ``comp``, ``cd`` (metres), ``prec``,
 ``recall``, ``fscore`` (fractions at the protocol threshold, 5 cm), ``nc`` (Replica only); ``psnr`` (dB),
-``ssim`` for image protocols. Protocol parameters live in ``configs/protocols.yaml`` (per scale).
+``ssim`` for image protocols; DTU: ``cd`` (Chamfer (d2s + s2d) / 2), ``acc`` (d2s), ``comp`` (s2d), metres. Protocol parameters live in ``configs/protocols.yaml`` (per scale).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from bench.scene import Scene
 from methods.base import Snapshot
 
 PROTOCOLS_FILE = Path(__file__).resolve().parent.parent / "configs" / "protocols.yaml"
-SUPPORTED_PROTOCOLS = ("scannet", "replica", "llff")
+SUPPORTED_PROTOCOLS = ("scannet", "replica", "dtu", "llff")
 MESH_KEYS = {"accuracy": "acc", "completion": "comp", "chamfer": "cd", "precision": "prec", "recall": "recall", "fscore": "fscore", "normal_consistency": "nc"}
 
 
@@ -68,6 +68,58 @@ def _replica_gt(scene: Scene, views: np.ndarray, params: dict[str, Any], seed: i
     return _GT_CACHE[key]
 
 
+def _crop_to_box(mesh: Any, lo: np.ndarray, hi: np.ndarray) -> Any:
+    """Faces of ``mesh`` cut exactly at the six planes of the axis-aligned box [lo, hi] (metres)."""
+    import trimesh
+    from trimesh.intersections import slice_faces_plane  # numpy only (Trimesh.slice_plane imports shapely)
+
+    v, f = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
+    for axis in range(3):
+        n = np.zeros(3)
+        n[axis] = 1.0
+        for origin, normal in ((lo, n), (hi, -n)):
+            if len(f):
+                v, f = slice_faces_plane(v, f, plane_normal=normal, plane_origin=origin)[:2]
+    return trimesh.Trimesh(v, f, process=False)
+
+
+def dtu_setup(scene: Scene, params: dict[str, Any], seed: int) -> dict[str, Any]:
+    """The GT side of the DTU protocol for a DTU-like synthetic scene (cached per scene):
+
+    * lengths: :meth:`metrics.dtu.DTUParams.scaled` from the object's largest extent (the scene's
+      ``metadata.layout.object_bounds_m``) and the image downscale ``dtu_width_px / W``;
+    * evaluation box (DTU's ObsMask box): the object's box widened by ``patch`` on every side;
+    * GT "STL" cloud: the GT mesh (object + ground) cut to the ``data_in`` region
+      ``[box_min - patch, box_max + 2 patch)``, DTU-sampled, restricted to what the ``eval_only``
+      (dense) views see;
+    * observation mask: the same views, with the full GT mesh's depth for occlusion;
+    * ground plane P: the scene's ``ground_plane`` raised by ``ground_offset_frac x max_dist``, so
+      s2d runs over the object's GT points only (DTU's ``stl_above``).
+    """
+    from metrics.culling import render_depth_maps
+    from metrics.dtu import DTUParams, dtu_gt_points
+
+    layout = (scene.metadata or {}).get("layout") or {}
+    where = Path(scene.root) / "meta.json" if scene.root else scene.name
+    if "object_bounds_m" not in layout or "ground_plane" not in layout:
+        raise BenchInputError(where, "the DTU protocol needs metadata.layout.object_bounds_m and ground_plane "
+                              "(written by `bench scenes make` for object scenes)")
+    bounds = np.asarray(layout["object_bounds_m"], dtype=np.float64)
+    dtu = DTUParams.scaled(float((bounds[1] - bounds[0]).max()), image_downscale=float(params["dtu_width_px"]) / scene.width)
+    views = scene.view_indices("eval_only") if "eval_only" in scene.splits else np.arange(scene.num_views)
+    K, c2w = scene.intrinsics[views], scene.cam_to_world[views]
+    bbox = np.stack([bounds[0] - dtu.patch, bounds[1] + dtu.patch])
+    gt_mesh = scene.load_gt_mesh()
+    region = _crop_to_box(gt_mesh, bbox[0] - dtu.patch, bbox[1] + 2 * dtu.patch)
+    plane = np.asarray(layout["ground_plane"], dtype=np.float64).copy()
+    plane[3] -= float(params["ground_offset_frac"]) * dtu.max_dist * np.linalg.norm(plane[:3])
+    return {
+        "params": dtu, "bbox": bbox, "plane": plane, "K": K, "c2w": c2w,
+        "gt_points": dtu_gt_points(region, K, c2w, scene.height, scene.width, dtu, seed=seed),
+        "depth": render_depth_maps(gt_mesh, K, c2w, scene.height, scene.width),
+    }
+
+
 def evaluate_snapshot(snapshot: Snapshot, scene: Scene, protocol: str, scale: str, seed: int = 0) -> dict[str, float]:
     """Metrics of one snapshot.
 
@@ -92,6 +144,20 @@ def evaluate_snapshot(snapshot: Snapshot, scene: Scene, protocol: str, scale: st
             return _mesh_metrics(evaluate_mesh_scannet(snapshot.mesh, gt, *cams, refuse_gt=False, **params))
         prepared = _replica_gt(scene, views, params, seed)
         return _mesh_metrics(evaluate_mesh_replica(snapshot.mesh, None, *cams, seed=seed, prepared_gt=prepared, **params))
+    if protocol == "dtu":
+        from metrics.dtu import dtu_chamfer
+
+        params = protocol_params(protocol, scale)
+        key = ("dtu", str(scene.root or scene.name), tuple(sorted(params.items())), seed)
+        if key not in _GT_CACHE:
+            if len(_GT_CACHE) > 4:
+                _GT_CACHE.clear()
+            _GT_CACHE[key] = dtu_setup(scene, params, seed)
+        d = _GT_CACHE[key]
+        r = dtu_chamfer(snapshot.mesh, d["gt_points"], d["K"], d["c2w"], scene.height, scene.width, d["params"],
+                        gt_depth_maps=d["depth"], bbox=d["bbox"], ground_plane=d["plane"], seed=seed)
+        out = {"cd": r.chamfer, "acc": r.d2s, "comp": r.s2d}
+        return {k: float(v) for k, v in out.items() if np.isfinite(v)}
     if protocol == "llff":
         from metrics.image import psnr, ssim
 

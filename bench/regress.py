@@ -248,7 +248,7 @@ def run_regress(args: argparse.Namespace) -> int:
     """``bench regress``: fresh run(s), comparison or reference update, report; returns the exit code."""
     from bench.cli import TABLES_DIR, _executor, _table_path, select_plans
     from bench.report import build_table, collect_results, write_table_outputs
-    from bench.runner import _versions, resolve_jobs, run_jobs
+    from bench.runner import _versions, plan_index, resolve_jobs, run_jobs
     from bench.tables import list_tables, load_table_spec, plan_jobs
     from methods.registry import available_methods
 
@@ -269,7 +269,7 @@ def run_regress(args: argparse.Namespace) -> int:
             run_jobs(jobs, out, force=True, show_progress=not args.quiet, executor=executor)
             df = collect_results(out)
             df = df[df["job_id"].isin({j.job_id for j in jobs})]
-            report = build_table(spec, df, args.scale, available_methods())
+            report = build_table(spec, df, args.scale, available_methods(), plans=plan_index(jobs))
             write_table_outputs(report, out)
             if args.update_reference:
                 doc = make_reference(spec, report, _versions(), rows=rows)

@@ -28,7 +28,7 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -171,8 +171,31 @@ def _match_group(jobs: pd.DataFrame, spec: TableSpec, g: DatasetGroup) -> pd.Ser
     return by_group | by_dataset
 
 
-def _select(spec: TableSpec, df: pd.DataFrame, scale: str) -> tuple[pd.DataFrame, int, int]:
-    """Jobs of ``spec`` at ``scale`` with a ``gid`` column; returns (jobs, n_unmatched, n_superseded)."""
+PlanIndex = Mapping[str, Sequence[Any]]  # job id -> the table's JobPlans with that id (bench.runner.plan_index)
+
+
+def _select_by_id(spec: TableSpec, df: pd.DataFrame, scale: str, plans: PlanIndex) -> tuple[pd.DataFrame, int, int]:
+    """The results whose job id is one of the table's planned jobs, labelled with the plan's row and
+    group: a job another table ran (same method, config, scene, variant, seed, scale, protocol) counts
+    here too. Results of this table with other ids (older configs or code versions) are unmatched."""
+    records = []
+    if len(df):
+        for rec in df[df["job_id"].isin(list(plans))].to_dict("records"):
+            for plan in plans[rec["job_id"]]:
+                records.append({**rec, "table": spec.name, "row": plan.row, "group": plan.group, "gid": plan.group})
+    both = pd.DataFrame.from_records(records, columns=list(df.columns) + ["gid"]) if records else df.iloc[:0].assign(gid="")
+    mine = df[(df["table"] == spec.name) & (df["scale"] == scale)] if len(df) else df
+    n_unmatched = int((~mine["job_id"].isin(list(plans))).sum()) if len(mine) else 0
+    return both.reset_index(drop=True), n_unmatched, 0
+
+
+def _select(spec: TableSpec, df: pd.DataFrame, scale: str, plans: PlanIndex | None = None) -> tuple[pd.DataFrame, int, int]:
+    """Jobs of ``spec`` at ``scale`` with a ``gid`` column; returns (jobs, n_unmatched, n_superseded).
+
+    With ``plans`` (the table's job ids), by job id (:func:`_select_by_id`); without, by the stored
+    table / row labels (results written by this table only; the most recent per cell wins)."""
+    if plans is not None:
+        return _select_by_id(spec, df, scale, plans)
     mine = df[(df["table"] == spec.name) & (df["scale"] == scale)] if len(df) else df
     res = resolve(spec, scale)
     parts = []
@@ -281,14 +304,16 @@ def _tidy(spec: TableSpec, cells: dict[tuple[str, str, str], Cell]) -> pd.DataFr
 
 
 def build_table(spec: TableSpec, df: pd.DataFrame, scale: str,
-                available_methods: Iterable[str] | None = None) -> TableReport:
+                available_methods: Iterable[str] | None = None, plans: PlanIndex | None = None) -> TableReport:
     """Aggregate the jobs of ``spec`` at ``scale`` into cells, timings and claim verdicts.
 
     ``available_methods``: names in the method registry; rows whose method is not among them (and
     which have no results) read "pending (method not implemented yet)". None means all are available.
+    ``plans``: the table's job ids (:func:`bench.runner.plan_index`): results are matched by id, so
+    jobs shared with other tables count; None matches by the stored table / row labels.
     """
     res = resolve(spec, scale)
-    jobs, n_unmatched, n_superseded = _select(spec, df if df is not None else empty_results(), scale)
+    jobs, n_unmatched, n_superseded = _select(spec, df if df is not None else empty_results(), scale, plans)
     avail = None if available_methods is None else set(available_methods)
     unavailable = {r.method for r in spec.rows if avail is not None and r.method not in avail}  # type: ignore[misc]
     cells: dict[tuple[str, str, str], Cell] = {}
@@ -565,14 +590,16 @@ def write_table_outputs(report: TableReport, out_dir: str | Path) -> dict[str, P
 
 
 def render_report(specs: Sequence[TableSpec], df: pd.DataFrame, scale: str, out_dir: str | Path,
-                  available_methods: Iterable[str] | None = None, title: str = "MonoInstance benchmark report") -> Path:
+                  available_methods: Iterable[str] | None = None, title: str = "MonoInstance benchmark report",
+                  plans: Mapping[str, PlanIndex] | None = None) -> Path:
     """Build and write every table's outputs into ``out_dir`` and one ``report.md`` assembling them.
 
-    Returns the path of ``report.md``. Raises BenchInputError if a spec does not define ``scale``.
+    ``plans``: per table name, its job ids (see :func:`build_table`). Returns the path of
+    ``report.md``. Raises BenchInputError if a spec does not define ``scale``.
     """
     out = Path(out_dir)
     avail = None if available_methods is None else set(available_methods)
-    reports = [build_table(s, df, scale, avail) for s in specs]
+    reports = [build_table(s, df, scale, avail, None if plans is None else plans.get(s.name)) for s in specs]
     sections = [f"# {title}", "", f"Scale: `{scale}`. Jobs read: {len(df)}.", ""]
     if len(df):
         scales = sorted({str(v) for v in df["scale"].unique()})

@@ -1,7 +1,8 @@
 """Jobs: one (table row, scene, seed, scale) each; run, evaluate, and store one JSON result per job.
 
 A job's id is a hash of what determines its result: method name, resolved method config, scene recipe
-content, seed, scale, evaluation protocol and the code version. Results are written atomically to
+content (and scene variant, when it changes the scene), seed, scale, evaluation protocol and the code
+version; not the table or row label, so identical rows of different tables are one job, run once. Results are written atomically to
 ``<out>/jobs/<job_id>.json``; a rerun skips jobs whose result exists (unless ``force``). A job that
 raises is recorded as ``status: failed`` with its error and traceback, never silently dropped.
 
@@ -66,7 +67,7 @@ def job_id_for(plan: JobPlan, config: dict[str, Any]) -> str:
         "method": plan.method,
         "config": config,
         "scene": plan.scene,
-        "recipe": recipe_hash(recipe_path(plan.scene)),
+        "recipe": recipe_hash(recipe_path(plan.scene), plan.effects),
         "seed": plan.seed,
         "scale": plan.scale,
         "protocol": plan.protocol,
@@ -86,6 +87,23 @@ def resolve_jobs(plans: list[JobPlan]) -> tuple[list[Job], list[JobPlan]]:
         config = method_config(plan.method, plan.scale, dict(plan.overrides))
         jobs.append(Job(plan, config, job_id_for(plan, config)))
     return jobs, pending
+
+
+def plan_index(jobs: list[Job]) -> dict[str, list[JobPlan]]:
+    """Job id -> the plans (table rows x group x scene x seed) it stands for; what
+    :func:`bench.report.build_table` matches results by, so a job shared by tables counts in each."""
+    index: dict[str, list[JobPlan]] = {}
+    for job in jobs:
+        index.setdefault(job.job_id, []).append(job.plan)
+    return index
+
+
+def unique_jobs(jobs: list[Job]) -> list[Job]:
+    """``jobs`` without repeated ids (the first plan of each id is the one that runs and labels the row)."""
+    first: dict[str, Job] = {}
+    for job in jobs:
+        first.setdefault(job.job_id, job)
+    return list(first.values())
 
 
 def result_path(out_dir: Path, job: Job) -> Path:
@@ -114,6 +132,7 @@ def row_head(job: Job) -> dict[str, Any]:
         "scene": plan.scene,
         "dataset": plan.dataset,
         "protocol": plan.protocol,
+        "effects": {k: dict(v) for k, v in plan.effects.items()},
         "seed": plan.seed,
         "scale": plan.scale,
         "versions": _versions(),
@@ -138,7 +157,7 @@ def run_job(job: Job, cache_dir: Path = DEFAULT_CACHE, progress: Callable[[float
     t_start = time.perf_counter()
     try:
         t = time.perf_counter()
-        scene = load_dataset(plan.scene, plan.scale, cache_dir)
+        scene = load_dataset(plan.scene, plan.scale, cache_dir, effects=plan.effects)
         timings["data"] = time.perf_counter() - t
 
         method = get_method(plan.method)

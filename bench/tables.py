@@ -17,7 +17,9 @@ raise :class:`~bench.errors.BenchInputError` naming the file and the key). The s
         dataset: scannet                # scannet | replica | dtu | llff
         protocol: scannet               # mesh/image evaluation protocol the runner uses
         scenes: {tiny: [scannet_like_tiny], small: [scannet_like_0, scannet_like_1]}
-        overrides: {}                   # optional, merged into every row's overrides (e.g. prior_profile)
+        overrides: {}                   # optional, merged into every row's method-config overrides
+        effects: {prior_profile: {profile: sim-geowizard}}   # optional scene variant: the group's scenes
+                                        # are made with these effect parameters (e.g. another prior)
         columns:
           - {key: acc, label: Acc, direction: lower, unit: m, fmt: ".3f"}
           - {key: lpips, label: LPIPS, direction: lower, paper_only: true}   # never measured by us
@@ -32,6 +34,7 @@ raise :class:`~bench.errors.BenchInputError` naming the file and the key). The s
         paper_label: null               # optional: the paper's row name when it differs from `label`
     paper_only_rows:
       - {label: MonoSDF, paper: {scannet: {acc: 0.035}}}
+    anchors: {object_mode: &object_mode {...}}  # optional, ignored: YAML anchors reused by rows
     claims:
       - {id: c1, text: "...", kind: monotone, group: scannet, metric: fscore,
          rows: [A, B, C], direction: increasing, strict: true}
@@ -89,7 +92,7 @@ class Column:
 
 @dataclass(frozen=True)
 class DatasetGroup:
-    """A column group: one dataset (and optionally extra overrides, e.g. a prior profile)."""
+    """A column group: one dataset (optionally with method-config overrides and a scene variant)."""
 
     id: str
     label: str
@@ -98,6 +101,7 @@ class DatasetGroup:
     scenes: Mapping[str, tuple[str, ...]]
     columns: tuple[Column, ...]
     overrides: Mapping[str, Any] = field(default_factory=dict)
+    effects: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     extra_metrics: tuple[str, ...] = ()
 
     def column(self, key: str) -> Column | None:
@@ -202,6 +206,7 @@ class JobPlan:
     scene: str
     seed: int
     scale: str
+    effects: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -307,7 +312,7 @@ def _column(ctx: _Ctx, obj: Any, key: str) -> Column:
 
 def _group(ctx: _Ctx, obj: Any, key: str) -> DatasetGroup:
     d = ctx.mapping(
-        obj, key, {"dataset", "protocol", "scenes", "columns"}, {"id", "label", "overrides", "extra_metrics"}
+        obj, key, {"dataset", "protocol", "scenes", "columns"}, {"id", "label", "overrides", "effects", "extra_metrics"}
     )
     dataset = ctx.choice(d["dataset"], f"{key}.dataset", DATASET_FORMATS)
     gid = ctx.string(d.get("id", dataset), f"{key}.id", pattern=True)
@@ -323,6 +328,9 @@ def _group(ctx: _Ctx, obj: Any, key: str) -> DatasetGroup:
     overrides = d.get("overrides", {})
     if not isinstance(overrides, dict):
         raise ctx.fail(f"{key}.overrides", f"expected a mapping, got {overrides!r}")
+    effects = d.get("effects", {}) or {}
+    if not isinstance(effects, dict) or not all(isinstance(v, dict) for v in effects.values()):
+        raise ctx.fail(f"{key}.effects", f"expected {{effect name: {{parameter: value}}}}, got {effects!r}")
     extra = d.get("extra_metrics", [])
     extra_t = ctx.strlist(extra, f"{key}.extra_metrics") if extra else ()
     if set(extra_t) & set(keys):
@@ -335,6 +343,7 @@ def _group(ctx: _Ctx, obj: Any, key: str) -> DatasetGroup:
         scenes=ctx.per_scale(d["scenes"], f"{key}.scenes", "scenes"),
         columns=columns,
         overrides=dict(overrides),
+        effects={k: dict(v) for k, v in effects.items()},
         extra_metrics=extra_t,
     )
 
@@ -450,7 +459,7 @@ def parse_table_spec(obj: Any, where: str | Path = "<table spec>") -> TableSpec:
     ctx = _Ctx(where)
     d = ctx.mapping(
         obj, "", {"name", "title", "paper_table", "datasets", "seeds", "rows"},
-        {"paper_only_rows", "claims", "notes", "main_metric"},
+        {"paper_only_rows", "claims", "notes", "main_metric", "anchors"},
     )
     name = ctx.string(d["name"], "name", pattern=True)
     if isinstance(where, Path) and where.suffix in (".yaml", ".yml") and where.stem != name:
@@ -553,5 +562,5 @@ def plan_jobs(spec: TableSpec, scale: str) -> list[JobPlan]:
             for scene in res.scenes[g.id]:
                 for seed in res.seeds:
                     jobs.append(JobPlan(spec.name, row.label, row.method, overrides, g.id, g.dataset,
-                                        g.protocol, scene, seed, scale))
+                                        g.protocol, scene, seed, scale, g.effects))
     return jobs

@@ -138,7 +138,7 @@ def _file_lock(path: Path) -> Iterator[None]:
             fcntl.flock(f.fileno(), fcntl.LOCK_UN)
 
 
-def prepare_dataset(scene: str, scale: str, cache_dir: Path) -> None:
+def prepare_dataset(scene: str, scale: str, cache_dir: Path, effects: Any = None) -> None:
     """Make sure the job's dataset is in the cache, safely when several workers want it at once.
 
     Synthesis is serialised per dataset with a file lock in ``<cache>/.locks/`` (workers of one
@@ -151,9 +151,9 @@ def prepare_dataset(scene: str, scale: str, cache_dir: Path) -> None:
     cache_dir = Path(cache_dir)
     with _file_lock(cache_dir / ".locks" / f"{scene}-{scale}.lock"):
         try:
-            ensure_dataset(scene, scale, cache_dir)
+            ensure_dataset(scene, scale, cache_dir, effects=effects)
         except FileExistsError:
-            ensure_dataset(scene, scale, cache_dir)  # the winner's folder is there now: just returns it
+            ensure_dataset(scene, scale, cache_dir, effects=effects)  # the winner's folder is there now: just returns it
 
 
 def _worker_identity() -> tuple[str, str]:
@@ -200,7 +200,7 @@ def execute_job(job: "Job", cache_dir: Path | None, attempt: int = 1, threads: i
     from bench.runner import failure_row, run_job
 
     try:
-        prepare_dataset(job.plan.scene, job.plan.scale, cache_dir)
+        prepare_dataset(job.plan.scene, job.plan.scale, cache_dir, job.plan.effects)
     except Exception as exc:  # bad recipe etc.: a failed row, like any other error of the job
         row = failure_row(job, type(exc).__name__, str(exc), traceback.format_exc())
     else:

@@ -195,7 +195,9 @@ def build_object(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layout
     radius = 0.5 * float(np.linalg.norm(mesh.extents)) * 1.1
     return Layout([ground, obj], K, poses, height, width, _sphere_scale_mat(centre, radius),
                   splits={"train": np.arange(len(train_az)), "eval_only": np.arange(len(train_az), n)},
-                  info={"object_extent_m": extent, "camera_distance_m": distance, "hfov_deg": hfov})
+                  info={"object_extent_m": extent, "camera_distance_m": distance, "hfov_deg": hfov,
+                        "object_bounds_m": mesh.bounds.tolist(),  # DTU protocol: evaluation box
+                        "ground_plane": [0.0, 0.0, 1.0, 0.0]})     # top of the ground box: z = 0
 
 
 def build_forward(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layout:

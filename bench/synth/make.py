@@ -19,7 +19,7 @@ from bench.atomic import atomic_directory
 from bench.errors import BenchInputError
 from bench.scene import InstanceInfo, Scene
 from bench.synth.layouts import build_layout
-from bench.synth.recipe import SCALES, Recipe, load_recipe, resolve_scale
+from bench.synth.recipe import SCALES, Recipe, load_recipe, resolve_scale, with_effect_overrides
 from bench.synth.render import SceneRaycaster
 
 
@@ -99,8 +99,12 @@ def make_dataset(
     seed: int | None = None,
     overwrite: bool = False,
     fmt_options: dict[str, Any] | None = None,
+    effect_overrides: dict[str, dict[str, Any]] | None = None,
 ) -> dict[str, Any]:
     """Synthesise the recipe and write it to ``out_dir`` in the recipe's format (atomically).
+
+    ``effect_overrides``: a scene variant, ``{effect name: {parameter: value}}`` (see
+    :func:`bench.synth.recipe.with_effect_overrides`).
 
     Returns:
         A summary: ``{"path", "format", "views", "height", "width", "seconds", "bytes"}``.
@@ -108,7 +112,7 @@ def make_dataset(
     from bench.formats import write_scene
 
     t0 = time.perf_counter()
-    recipe = load_recipe(recipe_path)
+    recipe = with_effect_overrides(load_recipe(recipe_path), effect_overrides)
     scene, gt_mesh = make_scene(recipe, scale=scale, seed=seed)
     options = dict(fmt_options or {})
     if recipe.format == "llff":

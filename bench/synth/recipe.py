@@ -122,6 +122,23 @@ def load_recipe(path: str | Path) -> Recipe:
     return parse_recipe(data, path, path=path)
 
 
+def with_effect_overrides(recipe: Recipe, overrides: dict[str, dict[str, Any]] | None) -> Recipe:
+    """A copy of ``recipe`` whose effects named in ``overrides`` get their parameters updated, e.g.
+    ``{"prior_profile": {"profile": "sim-metric3d-v2"}}`` (a table's scene variant). Raises
+    BenchInputError if the recipe has no effect of a given name (nothing is silently added)."""
+    if not overrides:
+        return recipe
+    names = [e["name"] for e in recipe.effects]
+    for name, params in overrides.items():
+        if name not in names:
+            raise BenchInputError(recipe.where("effects"), f"no effect {name!r} to override (effects: {names})")
+        if not isinstance(params, dict) or "name" in params:
+            raise BenchInputError(recipe.where("effects"), f"override of {name!r} must map parameter -> value (not 'name'), got {params!r}")
+    effects = [{**e, **overrides.get(e["name"], {})} for e in recipe.effects]
+    return Recipe(name=recipe.name, kind=recipe.kind, format=recipe.format, seed=recipe.seed,
+                  raw={**recipe.raw, "effects": effects}, path=recipe.path, effects=effects)
+
+
 def resolve_mesh_path(recipe: Recipe, path: str) -> Path:
     """Mesh paths in a recipe are relative to the recipe file's folder (or absolute)."""
     p = Path(path).expanduser()

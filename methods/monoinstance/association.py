@@ -109,12 +109,27 @@ def _strided(pts: np.ndarray, k: int) -> np.ndarray:
 
 
 def _check_config(cfg: dict[str, Any]) -> None:
-    if cfg["assoc_cluster"] not in ("components", "louvain", "greedy"):
-        raise ValueError(f"assoc_cluster must be components, louvain or greedy, got {cfg['assoc_cluster']!r}")
+    if cfg["assoc_cluster"] not in ("components", "louvain", "greedy", "given"):
+        raise ValueError(f"assoc_cluster must be components, louvain, greedy or given, got {cfg['assoc_cluster']!r}")
     if cfg["assoc_chamfer_mode"] not in ("symmetric", "min"):
         raise ValueError(f"assoc_chamfer_mode must be symmetric or min, got {cfg['assoc_chamfer_mode']!r}")
     if cfg["assoc_background"] not in ("associate", "mark"):
         raise ValueError(f"assoc_background must be associate or mark, got {cfg['assoc_background']!r}")
+
+
+def _given_ids(seg: np.ndarray, seg_background: list[dict[int, bool]]) -> Association:
+    """``assoc_cluster: given``: the per-view ids are already consistent across views (the paper's DTU
+    setting: one object segmented from the background, no multi-view association). A global id is
+    background when the majority of its pixels come from views that flag it so."""
+    ids = [int(i) for i in np.unique(seg) if i != 0]
+    votes = {i: 0 for i in ids}
+    nodes = []
+    for v in range(seg.shape[0]):
+        for i, n_px in zip(*np.unique(seg[v][seg[v] != 0], return_counts=True)):
+            nodes.append((v, int(i), int(i), int(n_px)))
+            votes[int(i)] += int(n_px) if seg_background[v].get(int(i), False) else -int(n_px)
+    return Association(global_ids=seg.astype(np.int32), is_background={i: votes[i] > 0 for i in ids}, nodes=nodes,
+                       n_nodes=len(nodes), n_clusters=len(ids))
 
 
 def associate_instances(
@@ -132,7 +147,8 @@ def associate_instances(
         seg_background: per view, dict local id -> True if background.
         depth: (N, H, W) aligned metric z-depth (metres, 0 = invalid).
         K: (N, 3, 3) intrinsics (pixels); cam_to_world: (N, 4, 4), OpenCV axes.
-        config: ``assoc_*`` keys (defaults :data:`ASSOC_DEFAULTS`; unknown keys are ignored here).
+        config: ``assoc_*`` keys (defaults :data:`ASSOC_DEFAULTS`; unknown keys are ignored here);
+            ``assoc_cluster: given`` skips the association and keeps the per-view ids (DTU).
 
     Returns:
         :class:`Association`. Deterministic (no randomness except Louvain's fixed seed).
@@ -148,6 +164,8 @@ def associate_instances(
     n_views = seg.shape[0]
     if len(seg_background) != n_views:
         raise ValueError(f"seg_background has {len(seg_background)} views, expected {n_views}")
+    if cfg["assoc_cluster"] == "given":
+        return _given_ids(seg, seg_background)
     K = np.broadcast_to(np.asarray(K, dtype=np.float64), (n_views, 3, 3))
     c2w = np.asarray(cam_to_world, dtype=np.float64)
 

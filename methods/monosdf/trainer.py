@@ -33,6 +33,16 @@ from methods.monosdf.render import RenderOutput, render_depth, render_rays
 PixelSampler = Callable[[int, int, torch.Generator], torch.Tensor]
 
 
+def resolve_inside_out(value: Any, scene: Scene) -> bool:
+    """The geometric-init orientation: ``true`` for rooms (cameras inside the surface), ``false`` for
+    objects (an outward sphere, MonoSDF/VolSDF DTU), ``"auto"`` from ``scene.kind`` (room -> true)."""
+    if value == "auto":
+        return scene.kind == "room"
+    if isinstance(value, bool):
+        return value
+    raise ValueError(f"inside_out must be true, false or 'auto', got {value!r}")
+
+
 class MonoSDFTrainer:
     """Holds the scene's training data, the networks and the optimiser."""
 
@@ -53,7 +63,7 @@ class MonoSDFTrainer:
 
         spec = make_grid_spec(cfg["grid_levels"], cfg["grid_features"], cfg["grid_log2_table"], cfg["grid_base_res"], cfg["grid_max_res"])
         self.sdf = SDFNetwork(spec, hidden=cfg["mlp_hidden"], layers=cfg["mlp_layers"], geo_features=cfg["geo_features"],
-                              radius=self.radius, init_radius=cfg["init_radius"], inside_out=cfg["inside_out"],
+                              radius=self.radius, init_radius=cfg["init_radius"], inside_out=resolve_inside_out(cfg["inside_out"], scene),
                               fast_grid=cfg["fast_grid"], seed=seed)
         self.color = ColorNetwork(cfg["geo_features"], cfg["color_hidden"], cfg["color_layers"])
         self.density = LaplaceDensity(cfg["beta_init"], cfg["beta_min"])
@@ -126,16 +136,20 @@ class MonoSDFTrainer:
     # ------------------------------------------------------------------ outputs
     @torch.no_grad()
     def sdf_on_grid(self, resolution: int, chunk: int = 262144) -> tuple[np.ndarray, np.ndarray, float]:
-        """SDF on a resolution^3 grid over the cube [-R, R]^3 -> (values (n, n, n), origin (3,), spacing)."""
+        """SDF on a resolution^3 grid over the cube [-E, E]^3 -> (values (n, n, n), origin (3,), spacing).
+
+        E = ``mesh_extent`` (normalised units) when set, else the bounding-sphere radius R: an object
+        scene whose sphere also holds the cameras extracts only around the object (cells of 2E/n)."""
         n = int(resolution)
-        lin = torch.linspace(-self.radius, self.radius, n)
+        extent = self.radius if self.cfg.get("mesh_extent") is None else min(float(self.cfg["mesh_extent"]), self.radius)
+        lin = torch.linspace(-extent, extent, n)
         vals = torch.empty(n, n, n)
         for i in range(n):
             xx, yy = torch.meshgrid(lin, lin, indexing="ij")
             pts = torch.stack([torch.full_like(xx, float(lin[i])), xx, yy], -1).reshape(-1, 3)
             out = [self.sdf(pts[s : s + chunk], with_gradient=False)[0] for s in range(0, len(pts), chunk)]
             vals[i] = torch.cat(out).reshape(n, n)
-        return vals.numpy(), np.full(3, -self.radius), float(2 * self.radius / (n - 1))
+        return vals.numpy(), np.full(3, -extent), float(2 * extent / (n - 1))
 
     def extract_mesh(self, resolution: int) -> trimesh.Trimesh:
         """Marching cubes (scikit-image) of the zero level set, in WORLD metres."""

@@ -77,7 +77,7 @@ def test_paper_values_match_the_tex() -> None:
     h2o = next(r for r in dense.paper_only_rows if r.label == "H2O-SDF")
     assert h2o.paper["replica"]["fscore"] is None  # type: ignore[index]
     priors = load_table_spec(CONFIGS / "tables" / "priors.yaml")
-    assert [g.overrides["prior_profile"] for g in priors.groups] == ["sim-omnidata", "sim-metric3d-v2", "sim-geowizard"]
+    assert [g.effects["prior_profile"]["profile"] for g in priors.groups] == ["sim-omnidata", "sim-metric3d-v2", "sim-geowizard"]
     assert "SIMULATED" in priors.title
     llff = load_table_spec(CONFIGS / "tables" / "llff.yaml")
     assert llff.groups[0].column("lpips").paper_only  # type: ignore[union-attr]

@@ -260,3 +260,13 @@ def test_scene_radius_and_save_maps(tiny, tiny_result, tmp_path):
     assert img.dtype == np.uint8 and img.shape == (tiny.height, tiny.width)
     np.testing.assert_array_equal(img, np.round(tiny_result.uncertainty[0] * 255).astype(np.uint8))
     assert not list((tmp_path / "u").glob(".*tmp"))
+
+
+def test_association_given_keeps_consistent_ids():
+    """``assoc_cluster: given`` (the paper's DTU setting) keeps per-view ids and votes background."""
+    depth, ids, K, c2w = plane_views(4)
+    bgs = [{1: False, 2: True} for _ in range(4)]
+    a = associate_instances(ids, bgs, depth, K, c2w, {"assoc_cluster": "given"})
+    np.testing.assert_array_equal(a.global_ids, ids)
+    assert a.is_background == {i: i == 2 for i in np.unique(ids) if i}
+    assert a.n_clusters == len([i for i in np.unique(ids) if i])

@@ -1,23 +1,42 @@
-"""The paper's tables at the tiny scale, end to end through the CLI (what `bench run` does at small scale,
-in CI-sized form): every implemented row runs without failure and the report has its claims section."""
+"""Every paper table at the tiny scale in one `bench run --table all`, end to end through the CLI (what
+the small-scale run does, in CI-sized form): jobs shared between tables run once and count in each,
+every table gets its CSV, markdown, plot and claims check, and one report.md assembles them."""
 
 from __future__ import annotations
 
 import json
 
-import pytest
+from bench.cli import TABLES_DIR, main
+from bench.runner import resolve_jobs
+from bench.tables import list_tables, load_table_spec, plan_jobs
 
-from bench.cli import main
+# A method outcome, not a harness error: 3-view colour-only training can lose the whole surface
+# (the DTU no-prior row); the table marks such jobs failed with this message.
+EMPTY_RECONSTRUCTION = "mesh is empty"
 
 
-@pytest.mark.parametrize("table", ["ablation", "dense", "llff"])
-def test_tiny_table_runs_end_to_end(table, tmp_path, capsys):
-    assert main(["run", "--table", table, "--scale", "tiny", "--out", str(tmp_path), "--quiet"]) == 0
+def test_all_tables_tiny(tmp_path):
+    assert main(["run", "--table", "all", "--scale", "tiny", "--out", str(tmp_path), "--quiet"]) == 0
     out = tmp_path / "tiny"
     rows = [json.loads(p.read_text()) for p in (out / "jobs").glob("*.json")]
-    assert rows and all(r["status"] == "ok" for r in rows), [(r["row"], r.get("error", {}).get("message")) for r in rows if r["status"] != "ok"]
-    md = (out / f"{table}.md").read_text()
-    assert "## Claims" in md and f"{len(rows)} ok, 0 failed, 0 pending" in md
-    assert (out / f"{table}_accuracy_vs_time.png").stat().st_size > 0
-    for r in rows:  # every row carries its cost in time, per stage
-        assert r["timings"]["total"] > 0 and r["curve"], r["row"]
+    errors = [(r["row"], r["scene"], r["error"]["message"]) for r in rows
+              if r["status"] != "ok" and EMPTY_RECONSTRUCTION not in r["error"]["message"]]
+    assert rows and not errors, errors
+    for r in rows:  # every job carries its cost in time, per stage
+        assert r["timings"]["total"] > 0 and (r["curve"] or r["status"] != "ok"), r["row"]
+
+    names = list_tables(TABLES_DIR)
+    planned = {t: resolve_jobs(plan_jobs(load_table_spec(TABLES_DIR / f"{t}.yaml"), "tiny"))[0] for t in names}
+    cells = sum(len(j) for j in planned.values())
+    assert len(rows) == len({j.job_id for jobs in planned.values() for j in jobs}) < cells  # shared jobs ran once
+
+    report = (out / "report.md").read_text()
+    for t in names:
+        md = (out / f"{t}.md").read_text()
+        status = next(line for line in md.splitlines() if line.startswith("Scale `tiny`"))
+        assert ", 0 pending of" in status and "## Claims" in md, (t, status)
+        assert (out / f"{t}_accuracy_vs_time.png").stat().st_size > 0
+        assert f"({t}.md)" in report
+    # the MonoInstance (Full) job of scannet_like_tiny is shared by the ablation, dense and priors tables
+    full = next(j for j in planned["ablation"] if j.plan.row == "+Mask Constraint (Full)")
+    assert any(j.job_id == full.job_id for j in planned["dense"]) and any(j.job_id == full.job_id for j in planned["priors"])
