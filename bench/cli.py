@@ -257,8 +257,23 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _interrupt_on_sigterm() -> None:
+    """SIGTERM (``kill``, a CI timeout) unwinds like Ctrl-C, so the executors stop their workers and no
+    temporary folder is left behind (the main thread only)."""
+    import signal
+    import threading
+
+    def handler(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, handler)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if argv is None:  # the console script, not a test calling main([...])
+        _interrupt_on_sigterm()
     try:
         return int(args.func(args) or 0)
     except BenchInputError as exc:
@@ -267,6 +282,9 @@ def main(argv: list[str] | None = None) -> int:
     except FileExistsError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt as exc:
+        print(f"interrupted ({exc or 'Ctrl-C'}): running jobs stopped; finished results are kept", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -32,7 +32,22 @@ START_METHOD = "forkserver"
 PRELOAD = ["bench.runner"]  # imported once by the fork server (torch, open3d, ...): workers start in ms
 
 
+def _exit_with_parent() -> None:
+    """Linux: the kernel sends SIGTERM to this worker when the process that started it dies (a killed
+    ``bench run`` must not leave its workers training on). No-op elsewhere."""
+    import ctypes
+    import signal
+    import sys
+
+    if sys.platform.startswith("linux"):
+        try:
+            ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, int(signal.SIGTERM))  # PR_SET_PDEATHSIG
+        except OSError:
+            pass
+
+
 def _init_worker(threads: int) -> None:
+    _exit_with_parent()
     set_job_threads(threads)
 
 
@@ -122,8 +137,8 @@ class LocalExecutor(Executor):
                 elif not finished:
                     yield Event("status", running=len(inflight))
         finally:
-            for fut in inflight:
-                fut.cancel()
+            if inflight:  # left early (Ctrl-C, SIGTERM, an error in the consumer): stop the running jobs
+                self._terminate_workers()
 
     def _lost(self, job: "Job", attempt: int, message: str, queue: deque) -> Iterator[Event]:
         if attempt <= self.retries:
@@ -131,6 +146,13 @@ class LocalExecutor(Executor):
             yield Event("retry", job, message=message, attempt=attempt + 1)
         else:
             yield Event("done", job, lost_row(job, attempt, message, "local"), attempt=attempt)
+
+    def _terminate_workers(self) -> None:
+        """Kill the pool's worker processes now (not after their jobs) and drop the pool."""
+        if self._pool is not None:
+            for proc in list((getattr(self._pool, "_processes", None) or {}).values()):
+                proc.terminate()
+            self._discard_pool()
 
     def _discard_pool(self) -> None:
         if self._pool is not None:

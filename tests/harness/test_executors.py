@@ -193,3 +193,44 @@ def test_make_executor_and_cli_flags(tmp_path, capsys):
 def test_pool_workers_get_their_share_of_threads(tmp_path):
     ex = LocalExecutor(workers=2)
     assert ex.threads == max(1, len(os.sched_getaffinity(0)) // 2)
+
+
+def test_sigterm_stops_the_workers(tmp_path):
+    """A killed `bench run` (SIGTERM: `kill`, a CI timeout) exits 130 and leaves no worker training on."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    proc = subprocess.Popen([sys.executable, "-m", "bench.cli", "run", "--table", "dense", "--scale", "tiny", "--workers", "2",
+                             "--out", str(tmp_path), "--quiet", "--force"], start_new_session=True,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 60
+    while time.time() < deadline and len(_session_pids(proc.pid)) < 4:  # main, fork server, 2 workers
+        time.sleep(0.5)
+    assert len(_session_pids(proc.pid)) >= 4, "the worker pool did not start"
+    time.sleep(2)  # the workers are inside their jobs now
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=30) == 130, proc.stderr.read()
+    deadline = time.time() + 10
+    while time.time() < deadline and _session_pids(proc.pid):
+        time.sleep(0.2)
+    assert not _session_pids(proc.pid)
+    assert "interrupted" in proc.stderr.read()
+
+
+def _session_pids(sid: int) -> list[int]:
+    """Live processes of session ``sid`` (Linux /proc)."""
+    import os
+
+    pids = []
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            try:
+                fields = open(f"/proc/{d}/stat").read().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[3]) == sid and fields[0] != "Z":  # field 6 of stat: session id; skip zombies
+                pids.append(int(d))
+    return pids
