@@ -58,7 +58,7 @@ UNCERTAINTY_DEFAULTS: dict[str, Any] = {
     "use_radius_clamp": True,
     "radius_clamp": [0.005, 0.07],
     "density_cap": 2000,
-    "density_ref_points": None,
+    "density_ref_points": 5000,  # speed option (None = the code); configs/methods/monoinstance_uncertainty.yaml
     "max_density_frac": 0.8,
     "min_views_per_instance": 2,
     "min_instance_points": 20,
