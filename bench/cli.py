@@ -245,6 +245,9 @@ def build_parser() -> argparse.ArgumentParser:
     reg.add_argument("--update-reference", action="store_true",
                      help="store this run as the new reference (refused if a job failed)")
     reg.add_argument("--rows", nargs="+", default=None, help="restrict to these row labels (the others count as not run)")
+    reg.add_argument("--from-results", default=None, metavar="DIR",
+                     help="no fresh run: use the results a `bench run --out DIR` stored (same job ids; "
+                          "e.g. to store a reference from a finished run)")
     reg.add_argument("--quiet", action="store_true", help="no progress bars")
     _add_executor_flags(reg)
     reg.set_defaults(func=cmd_regress)

@@ -176,3 +176,17 @@ def test_regress_cli_exit_codes(tmp_path, capsys):
     assert main(base) == 1
     text = capsys.readouterr().out
     assert "regressed" in text and "REGRESSION in ablation" in text
+
+
+def test_reference_from_stored_results_without_a_fresh_run(tmp_path):
+    """`--from-results DIR` stores / checks a reference from a finished `bench run` (no job reruns)."""
+    oracle = "Oracle: TSDF of GT depth (upper bound)"
+    runs, ref = tmp_path / "runs", tmp_path / "ref"
+    assert main(["run", "--table", "ablation", "--scale", "tiny", "--rows", oracle, "--out", str(runs), "--quiet", "--workers", "1"]) == 0
+    stamp = {p.name: p.stat().st_mtime_ns for p in (runs / "tiny" / "jobs").glob("*.json")}
+    base = ["regress", "--table", "ablation", "--scale", "tiny", "--rows", oracle, "--from-results", str(runs),
+            "--reference-dir", str(ref), "--out", str(tmp_path / "reg"), "--quiet"]
+    assert main(base + ["--update-reference"]) == 0
+    assert json.loads((ref / "tiny" / "ablation.json").read_text())["cells"][oracle]["scannet"]["fscore"]["mean"] > 0.9
+    assert main(base) == 0
+    assert {p.name: p.stat().st_mtime_ns for p in (runs / "tiny" / "jobs").glob("*.json")} == stamp  # nothing rerun
