@@ -168,9 +168,15 @@ def run_job(job: Job, cache_dir: Path = DEFAULT_CACHE, progress: Callable[[float
 
         curve = []
         t = time.perf_counter()
-        for snap in artifacts.snapshots:
-            metrics = evaluate_snapshot(snap, scene, plan.protocol, plan.scale, seed=plan.seed)
-            curve.append({"fraction": snap.fraction, "iterations": snap.iterations, "seconds": snap.seconds, "metrics": metrics})
+        for i, snap in enumerate(artifacts.snapshots):
+            point = {"fraction": snap.fraction, "iterations": snap.iterations, "seconds": snap.seconds}
+            try:
+                point["metrics"] = evaluate_snapshot(snap, scene, plan.protocol, plan.scale, seed=plan.seed)
+            except ValueError as exc:  # e.g. an empty mesh early in the schedule: that point has no metrics
+                if i == len(artifacts.snapshots) - 1:
+                    raise  # the final result itself cannot be evaluated: the job fails, with this message
+                point.update(metrics={}, error=f"{type(exc).__name__}: {exc}")
+            curve.append(point)
         timings["eval"] = (time.perf_counter() - t) / max(len(artifacts.snapshots), 1)
         final = dict(curve[-1]["metrics"]) if curve else {}
         final.update(method_metrics(artifacts.extra))

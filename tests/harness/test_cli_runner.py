@@ -7,6 +7,8 @@ from pathlib import Path
 
 import pytest
 
+from bench.executors.local import LocalExecutor
+
 from bench.cli import main
 from bench.runner import Job, job_id_for, resolve_jobs, run_jobs
 from bench.tables import JobPlan, load_table_spec, plan_jobs
@@ -75,6 +77,31 @@ def test_failed_job_is_recorded_not_dropped(tmp_path):
     assert rows[0]["status"] == "failed"
     assert rows[0]["error"]["type"] == "ValueError" and "Traceback" in rows[0]["error"]["traceback"]
     assert json.loads((tmp_path / "jobs" / "deadbeefdeadbeef.json").read_text())["status"] == "failed"
+
+
+@pytest.mark.parametrize("bad", [0, 2])
+def test_unevaluable_snapshot(tmp_path, monkeypatch, bad):
+    """An early snapshot that cannot be evaluated (e.g. an empty mesh) is a curve point without metrics;
+    the final one failing fails the job, with the evaluator's message."""
+    import bench.runner as runner
+
+    real, calls = runner.evaluate_snapshot, []
+
+    def flaky(snap, *a, **k):
+        calls.append(snap.fraction)
+        if len(calls) - 1 == bad:
+            raise ValueError("pred_mesh is empty")
+        return real(snap, *a, **k)
+
+    monkeypatch.setattr(runner, "evaluate_snapshot", flaky)
+    plan = JobPlan("t", "oracle", "oracle_tsdf", {}, "scannet", "scannet", "scannet", "scannet_like_tiny", 0, "tiny")
+    row = run_jobs([Job(plan, method_config("oracle_tsdf", "tiny"), f"job{bad}")], tmp_path, show_progress=False,
+                   executor=LocalExecutor(workers=1))[0]
+    if bad == 0:
+        assert row["status"] == "ok" and row["curve"][0]["metrics"] == {} and "empty" in row["curve"][0]["error"]
+        assert row["metrics"]["fscore"] > 0.9 and len(row["curve"]) == 3
+    else:
+        assert row["status"] == "failed" and "pred_mesh is empty" in row["error"]["message"]
 
 
 def test_pending_methods_are_reported_not_run():
