@@ -470,6 +470,9 @@ def to_markdown(report: TableReport, heading_level: int = 2) -> str:
     if spec.notes:
         parts += [""] + [f"- {n}" for n in spec.notes]
     parts += ["", f"{h}# Stage timings (mean wall seconds per job)", "", _timing_markdown(report)]
+    cost = _table_cost(report)
+    if cost:
+        parts += ["", cost]
     parts += ["", f"{h}# Claims", "", _claims_markdown(report)]
     failed = jobs[jobs["status"] == "failed"]
     if len(failed):
@@ -498,6 +501,18 @@ def _paper_line(spec: TableSpec, label: str, paper: Any) -> list[str]:
             line.append("" if vals is None or c.key not in vals else _num(vals[c.key], fmt))
         line.append("")
     return line
+
+
+def _table_cost(report: TableReport) -> str:
+    """One line: what the whole table costs on its own (sum of the jobs' wall seconds, each on the
+    threads its worker had), and per torch-thread count, so runs with shared jobs can be budgeted."""
+    ok = report.jobs[report.jobs["status"] == "ok"]
+    if ok.empty:
+        return ""
+    total = pd.to_numeric(ok["timings"].map(lambda t: t.get("total")), errors="coerce").dropna()
+    return (f"Table cost: {len(total)} jobs, {total.sum() / 60:.1f} job-minutes in total (sum of the jobs' wall "
+            f"times, including those another table ran first); with 2 workers on 2 cores about "
+            f"{total.sum() / 120:.1f} min of wall time.")
 
 
 def _timing_markdown(report: TableReport) -> str:
