@@ -192,11 +192,9 @@ def cmd_regress(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     from bench.report import collect_results, render_report
-    from bench.tables import list_tables, load_table_spec
-    from methods.registry import available_methods
-
     from bench.runner import plan_index, resolve_jobs
-    from bench.tables import plan_jobs
+    from bench.tables import list_tables, load_table_spec, plan_jobs
+    from methods.registry import available_methods
 
     out = Path(args.out) / args.scale
     names = args.table or list_tables(TABLES_DIR)

@@ -8,7 +8,7 @@ Metric keys produced (the table specs' column keys): ``acc``, ``comp``, ``cd`` (
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import yaml
@@ -41,31 +41,35 @@ def _mesh_metrics(result: Any) -> dict[str, float]:
 
 
 _GT_CACHE: dict[tuple, Any] = {}  # GT-side work per scene: identical for every snapshot of a job
+_GT_CACHE_SIZE = 5
+
+
+def _cached_gt(protocol: str, scene: Scene, params: dict[str, Any], extra: tuple, compute: Callable[[], Any]) -> Any:
+    """``compute()`` once per (protocol, scene, parameters, ``extra``): the GT side of an evaluation,
+    reused by every snapshot of the job (the cache holds at most :data:`_GT_CACHE_SIZE` scenes)."""
+    key = (protocol, str(scene.root or scene.name), tuple(sorted(params.items())), extra)
+    if key not in _GT_CACHE:
+        if len(_GT_CACHE) >= _GT_CACHE_SIZE:
+            _GT_CACHE.clear()
+        _GT_CACHE[key] = compute()
+    return _GT_CACHE[key]
 
 
 def _refused_gt(scene: Scene, views: np.ndarray, params: dict[str, Any]) -> Any:
     from metrics.culling import tsdf_refuse
 
-    key = (str(scene.root or scene.name), tuple(int(v) for v in views), tuple(sorted(params.items())))
-    if key not in _GT_CACHE:
-        if len(_GT_CACHE) > 4:
-            _GT_CACHE.clear()
-        _GT_CACHE[key] = tsdf_refuse(scene.load_gt_mesh(), scene.intrinsics[views], scene.cam_to_world[views], scene.height, scene.width,
-                                     voxel_size=params["tsdf_voxel"], sdf_trunc=params["tsdf_trunc"], depth_trunc=params["depth_trunc"])
-    return _GT_CACHE[key]
+    return _cached_gt("scannet", scene, params, tuple(int(v) for v in views), lambda: tsdf_refuse(
+        scene.load_gt_mesh(), scene.intrinsics[views], scene.cam_to_world[views], scene.height, scene.width,
+        voxel_size=params["tsdf_voxel"], sdf_trunc=params["tsdf_trunc"], depth_trunc=params["depth_trunc"]))
 
 
 def _replica_gt(scene: Scene, views: np.ndarray, params: dict[str, Any], seed: int) -> Any:
     from metrics.protocols import prepare_replica_gt
 
-    key = ("replica", str(scene.root or scene.name), tuple(int(v) for v in views), tuple(sorted(params.items())), seed)
-    if key not in _GT_CACHE:
-        if len(_GT_CACHE) > 4:
-            _GT_CACHE.clear()
-        gt_params = {k: v for k, v in params.items() if k != "threshold"}
-        _GT_CACHE[key] = prepare_replica_gt(scene.load_gt_mesh(), scene.intrinsics[views], scene.cam_to_world[views],
-                                            scene.height, scene.width, seed=seed, **gt_params)
-    return _GT_CACHE[key]
+    gt_params = {k: v for k, v in params.items() if k != "threshold"}
+    return _cached_gt("replica", scene, params, (tuple(int(v) for v in views), seed), lambda: prepare_replica_gt(
+        scene.load_gt_mesh(), scene.intrinsics[views], scene.cam_to_world[views], scene.height, scene.width,
+        seed=seed, **gt_params))
 
 
 def _crop_to_box(mesh: Any, lo: np.ndarray, hi: np.ndarray) -> Any:
@@ -148,12 +152,7 @@ def evaluate_snapshot(snapshot: Snapshot, scene: Scene, protocol: str, scale: st
         from metrics.dtu import dtu_chamfer
 
         params = protocol_params(protocol, scale)
-        key = ("dtu", str(scene.root or scene.name), tuple(sorted(params.items())), seed)
-        if key not in _GT_CACHE:
-            if len(_GT_CACHE) > 4:
-                _GT_CACHE.clear()
-            _GT_CACHE[key] = dtu_setup(scene, params, seed)
-        d = _GT_CACHE[key]
+        d = _cached_gt("dtu", scene, params, (seed,), lambda: dtu_setup(scene, params, seed))
         r = dtu_chamfer(snapshot.mesh, d["gt_points"], d["K"], d["c2w"], scene.height, scene.width, d["params"],
                         gt_depth_maps=d["depth"], bbox=d["bbox"], ground_plane=d["plane"], seed=seed)
         out = {"cd": r.chamfer, "acc": r.d2s, "comp": r.s2d}

@@ -504,8 +504,8 @@ def _paper_line(spec: TableSpec, label: str, paper: Any) -> list[str]:
 
 
 def _table_cost(report: TableReport) -> str:
-    """One line: what the whole table costs on its own (sum of the jobs' wall seconds, each on the
-    threads its worker had), and per torch-thread count, so runs with shared jobs can be budgeted."""
+    """One line: what the whole table costs on its own (sum of its successful jobs' wall seconds, each
+    on the threads its worker had, and that sum over 2 workers), so runs with shared jobs can be budgeted."""
     ok = report.jobs[report.jobs["status"] == "ok"]
     if ok.empty:
         return ""
