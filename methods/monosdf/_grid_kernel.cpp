@@ -2,6 +2,12 @@
 // table gradient (backward). Same contract as grid.py::interpolate_reference (the tests compare them).
 // x: (P, 3) float32 in [-1, 1]; meta: (L, 4) int64 rows [resolution, offset, size, hashed];
 // table: (rows, F) float32. feat: (P, L*F); jac: (P, 3, L*F) = d feat / d x.
+//
+// Speed notes (benchmarks/bench_grid_kernel.py measures them): levels are the OUTER loop, so one
+// level's slice of the table (<= 2^log2_table rows) stays in the core's L2 cache while all points
+// visit it; the hash is computed in uint32 (its low bits equal the int64 reference's, since the table
+// size is a power of two <= 2^32) from per-axis terms, 6 multiplies per cell instead of 24; the
+// feature count is a template parameter for the common sizes so the inner loops unroll.
 #include <torch/extension.h>
 #include <cmath>
 #include <cstdint>
@@ -10,13 +16,13 @@
 
 namespace {
 
-inline int64_t corner_index(int64_t vx, int64_t vy, int64_t vz, int64_t res, int64_t size, bool hashed) {
-    if (hashed) {
-        uint64_t h = (uint64_t)vx * 1ull ^ (uint64_t)vy * 2654435761ull ^ (uint64_t)vz * 805459861ull;
-        return (int64_t)(h & (uint64_t)(size - 1));
-    }
-    const int64_t n = res + 1;
-    return vx + n * (vy + n * vz);
+struct Level {
+    int64_t res, offset, size;
+    bool hashed;
+};
+
+inline Level level_of(const int64_t* mp, int64_t l) {
+    return Level{mp[4 * l], mp[4 * l + 1], mp[4 * l + 2], mp[4 * l + 3] != 0};
 }
 
 struct Cell {
@@ -25,31 +31,134 @@ struct Cell {
     float dw[8][3];
 };
 
-inline void cell_for(const float* xp, int64_t res, int64_t offset, int64_t size, bool hashed, bool need_dw, Cell& c) {
+// Corner k = cx + 2 cy + 4 cz of the cell holding point xp at level lv: table rows, trilinear weights
+// and (need_dw) their derivatives d w / d x (the 0.5 res factor of d pos / d x included).
+template <bool NEED_DW>
+inline void cell_for(const float* xp, const Level& lv, Cell& c) {
     int64_t i0[3];
     float f[3];
+    const float res_f = (float)lv.res;
     for (int d = 0; d < 3; ++d) {
-        float xd = xp[d] < -1.f ? -1.f : (xp[d] > 1.f ? 1.f : xp[d]);
-        float pos = (xd + 1.f) * 0.5f * (float)res;
+        const float xd = xp[d] < -1.f ? -1.f : (xp[d] > 1.f ? 1.f : xp[d]);
+        const float pos = (xd + 1.f) * 0.5f * res_f;
         float fl = std::floor(pos);
-        if (fl < 0.f) fl = 0.f;
-        if (fl > (float)(res - 1)) fl = (float)(res - 1);
+        fl = fl < 0.f ? 0.f : (fl > res_f - 1.f ? res_f - 1.f : fl);
         i0[d] = (int64_t)fl;
         f[d] = pos - fl;
     }
-    const float half_res = 0.5f * (float)res;
+    int64_t ax[2], ay[2], az[2];  // per-axis index terms of corners 0 / 1 along that axis
+    if (lv.hashed) {
+        ax[0] = (int64_t)(uint32_t)i0[0];
+        ax[1] = (int64_t)(uint32_t)(i0[0] + 1);
+        ay[0] = (int64_t)((uint32_t)i0[1] * 2654435761u);
+        ay[1] = (int64_t)((uint32_t)(i0[1] + 1) * 2654435761u);
+        az[0] = (int64_t)((uint32_t)i0[2] * 805459861u);
+        az[1] = (int64_t)((uint32_t)(i0[2] + 1) * 805459861u);
+    } else {
+        const int64_t n = lv.res + 1;
+        ax[0] = i0[0];
+        ax[1] = i0[0] + 1;
+        ay[0] = n * i0[1];
+        ay[1] = n * (i0[1] + 1);
+        az[0] = n * n * i0[2];
+        az[1] = n * n * (i0[2] + 1);
+    }
+    const int64_t mask = lv.size - 1;
+    const float wx[2] = {1.f - f[0], f[0]}, wy[2] = {1.f - f[1], f[1]}, wz[2] = {1.f - f[2], f[2]};
+    const float half_res = 0.5f * res_f;
     for (int k = 0; k < 8; ++k) {
         const int cx = k & 1, cy = (k >> 1) & 1, cz = (k >> 2) & 1;
-        const float wx = cx ? f[0] : 1.f - f[0];
-        const float wy = cy ? f[1] : 1.f - f[1];
-        const float wz = cz ? f[2] : 1.f - f[2];
-        c.idx[k] = offset + corner_index(i0[0] + cx, i0[1] + cy, i0[2] + cz, res, size, hashed);
-        c.w[k] = wx * wy * wz;
-        if (need_dw) {
-            c.dw[k][0] = (cx ? 1.f : -1.f) * wy * wz * half_res;
-            c.dw[k][1] = wx * (cy ? 1.f : -1.f) * wz * half_res;
-            c.dw[k][2] = wx * wy * (cz ? 1.f : -1.f) * half_res;
+        const int64_t local = lv.hashed ? ((ax[cx] ^ ay[cy] ^ az[cz]) & mask) : (ax[cx] + ay[cy] + az[cz]);
+        c.idx[k] = lv.offset + local;
+        c.w[k] = wx[cx] * wy[cy] * wz[cz];
+        if (NEED_DW) {
+            c.dw[k][0] = (cx ? half_res : -half_res) * wy[cy] * wz[cz];
+            c.dw[k][1] = wx[cx] * (cy ? half_res : -half_res) * wz[cz];
+            c.dw[k][2] = wx[cx] * wy[cy] * (cz ? half_res : -half_res);
         }
+    }
+}
+
+// Forward for one level over all points (FT = features per level, 0 = runtime `F`).
+template <int FT, bool WITH_JAC>
+void forward_level(const float* tp, const float* xp, const Level& lv, int64_t l, int64_t P, int64_t F_rt, int64_t C,
+                   float* fp, float* jp) {
+    const int64_t F = FT > 0 ? FT : F_rt;
+#pragma omp parallel for schedule(static)
+    for (int64_t p = 0; p < P; ++p) {
+        Cell c;
+        cell_for<WITH_JAC>(xp + 3 * p, lv, c);
+        for (int64_t ff = 0; ff < F; ++ff) {
+            float acc = 0.f, a0 = 0.f, a1 = 0.f, a2 = 0.f;
+            for (int k = 0; k < 8; ++k) {
+                const float v = tp[c.idx[k] * F + ff];
+                acc += c.w[k] * v;
+                if (WITH_JAC) {
+                    a0 += c.dw[k][0] * v;
+                    a1 += c.dw[k][1] * v;
+                    a2 += c.dw[k][2] * v;
+                }
+            }
+            const int64_t col = l * F + ff;
+            fp[p * C + col] = acc;
+            if (WITH_JAC) {
+                jp[(p * 3 + 0) * C + col] = a0;
+                jp[(p * 3 + 1) * C + col] = a1;
+                jp[(p * 3 + 2) * C + col] = a2;
+            }
+        }
+    }
+}
+
+// Backward for one level: each thread scatters into its own copy of the table gradient (no atomics).
+template <int FT, bool HAS_FEAT, bool HAS_JAC>
+void backward_level(const float* gf, const float* gj, const float* xp, const Level& lv, int64_t l, int64_t P, int64_t F_rt,
+                    int64_t C, int64_t rows, float* part) {
+    const int64_t F = FT > 0 ? FT : F_rt;
+#pragma omp parallel
+    {
+        float* gt = part + (int64_t)omp_get_thread_num() * rows * F;
+        Cell c;
+#pragma omp for schedule(static)
+        for (int64_t p = 0; p < P; ++p) {
+            cell_for<HAS_JAC>(xp + 3 * p, lv, c);
+            for (int64_t ff = 0; ff < F; ++ff) {
+                const int64_t col = l * F + ff;
+                const float g = HAS_FEAT ? gf[p * C + col] : 0.f;
+                float g0 = 0.f, g1 = 0.f, g2 = 0.f;
+                if (HAS_JAC) {
+                    g0 = gj[(p * 3 + 0) * C + col];
+                    g1 = gj[(p * 3 + 1) * C + col];
+                    g2 = gj[(p * 3 + 2) * C + col];
+                }
+                for (int k = 0; k < 8; ++k) {
+                    float v = HAS_FEAT ? c.w[k] * g : 0.f;
+                    if (HAS_JAC) v += c.dw[k][0] * g0 + c.dw[k][1] * g1 + c.dw[k][2] * g2;
+                    gt[c.idx[k] * F + ff] += v;
+                }
+            }
+        }
+    }
+}
+
+template <int FT>
+void forward_all(const float* tp, const float* xp, const int64_t* mp, int64_t L, int64_t P, int64_t F, bool with_jac, float* fp, float* jp) {
+    const int64_t C = L * F;
+    for (int64_t l = 0; l < L; ++l) {
+        const Level lv = level_of(mp, l);
+        if (with_jac) forward_level<FT, true>(tp, xp, lv, l, P, F, C, fp, jp);
+        else forward_level<FT, false>(tp, xp, lv, l, P, F, C, fp, jp);
+    }
+}
+
+template <int FT>
+void backward_all(const float* gf, const float* gj, const float* xp, const int64_t* mp, int64_t L, int64_t P, int64_t F, int64_t rows, float* part) {
+    const int64_t C = L * F;
+    for (int64_t l = 0; l < L; ++l) {
+        const Level lv = level_of(mp, l);
+        if (gf && gj) backward_level<FT, true, true>(gf, gj, xp, lv, l, P, F, C, rows, part);
+        else if (gf) backward_level<FT, true, false>(gf, gj, xp, lv, l, P, F, C, rows, part);
+        else if (gj) backward_level<FT, false, true>(gf, gj, xp, lv, l, P, F, C, rows, part);
     }
 }
 
@@ -58,79 +167,37 @@ inline void cell_for(const float* xp, int64_t res, int64_t offset, int64_t size,
 std::vector<torch::Tensor> grid_forward(torch::Tensor table, torch::Tensor x, torch::Tensor meta, int64_t F, bool with_jac) {
     TORCH_CHECK(table.dtype() == torch::kFloat32 && x.dtype() == torch::kFloat32, "float32 expected");
     const int64_t P = x.size(0), L = meta.size(0), C = L * F;
-    auto feat = torch::zeros({P, C}, x.options());
-    auto jac = with_jac ? torch::zeros({P, 3, C}, x.options()) : torch::zeros({0}, x.options());
+    auto feat = torch::empty({P, C}, x.options());
+    auto jac = with_jac ? torch::empty({P, 3, C}, x.options()) : torch::zeros({0}, x.options());
     const float* tp = table.data_ptr<float>();
     const float* xp = x.data_ptr<float>();
     const int64_t* mp = meta.data_ptr<int64_t>();
     float* fp = feat.data_ptr<float>();
     float* jp = with_jac ? jac.data_ptr<float>() : nullptr;
-#pragma omp parallel for schedule(static)
-    for (int64_t p = 0; p < P; ++p) {
-        Cell c;
-        for (int64_t l = 0; l < L; ++l) {
-            cell_for(xp + 3 * p, mp[4 * l], mp[4 * l + 1], mp[4 * l + 2], mp[4 * l + 3] != 0, with_jac, c);
-            for (int64_t ff = 0; ff < F; ++ff) {
-                float acc = 0.f, a0 = 0.f, a1 = 0.f, a2 = 0.f;
-                for (int k = 0; k < 8; ++k) {
-                    const float v = tp[c.idx[k] * F + ff];
-                    acc += c.w[k] * v;
-                    if (with_jac) {
-                        a0 += c.dw[k][0] * v;
-                        a1 += c.dw[k][1] * v;
-                        a2 += c.dw[k][2] * v;
-                    }
-                }
-                const int64_t col = l * F + ff;
-                fp[p * C + col] = acc;
-                if (with_jac) {
-                    jp[(p * 3 + 0) * C + col] = a0;
-                    jp[(p * 3 + 1) * C + col] = a1;
-                    jp[(p * 3 + 2) * C + col] = a2;
-                }
-            }
-        }
+    switch (F) {
+        case 1: forward_all<1>(tp, xp, mp, L, P, F, with_jac, fp, jp); break;
+        case 2: forward_all<2>(tp, xp, mp, L, P, F, with_jac, fp, jp); break;
+        case 4: forward_all<4>(tp, xp, mp, L, P, F, with_jac, fp, jp); break;
+        default: forward_all<0>(tp, xp, mp, L, P, F, with_jac, fp, jp);
     }
     return {feat, jac};
 }
 
 torch::Tensor grid_backward(torch::Tensor grad_feat, torch::Tensor grad_jac, torch::Tensor x, torch::Tensor meta, int64_t rows, int64_t F) {
-    // Each thread scatters into its own copy of the table gradient (no atomics), then the copies are summed.
-    const int64_t P = x.size(0), L = meta.size(0), C = L * F;
+    // Per-thread copies of the table gradient, summed at the end.
+    const int64_t P = x.size(0), L = meta.size(0);
     const int nthreads = omp_get_max_threads();
     auto partial = torch::zeros({nthreads, rows, F}, x.options());
-    const bool has_feat = grad_feat.numel() > 0;
-    const bool has_jac = grad_jac.numel() > 0;
-    const float* gf = has_feat ? grad_feat.data_ptr<float>() : nullptr;
-    const float* gj = has_jac ? grad_jac.data_ptr<float>() : nullptr;
+    const float* gf = grad_feat.numel() > 0 ? grad_feat.data_ptr<float>() : nullptr;
+    const float* gj = grad_jac.numel() > 0 ? grad_jac.data_ptr<float>() : nullptr;
     const float* xp = x.data_ptr<float>();
     const int64_t* mp = meta.data_ptr<int64_t>();
     float* part = partial.data_ptr<float>();
-#pragma omp parallel num_threads(nthreads)
-    {
-        float* gt = part + (int64_t)omp_get_thread_num() * rows * F;
-        Cell c;
-#pragma omp for schedule(static)
-        for (int64_t p = 0; p < P; ++p) {
-            for (int64_t l = 0; l < L; ++l) {
-                cell_for(xp + 3 * p, mp[4 * l], mp[4 * l + 1], mp[4 * l + 2], mp[4 * l + 3] != 0, has_jac, c);
-                for (int64_t ff = 0; ff < F; ++ff) {
-                    const int64_t col = l * F + ff;
-                    const float g = has_feat ? gf[p * C + col] : 0.f;
-                    float g0 = 0.f, g1 = 0.f, g2 = 0.f;
-                    if (has_jac) {
-                        g0 = gj[(p * 3 + 0) * C + col];
-                        g1 = gj[(p * 3 + 1) * C + col];
-                        g2 = gj[(p * 3 + 2) * C + col];
-                    }
-                    for (int k = 0; k < 8; ++k) {
-                        float v = c.w[k] * g;
-                        if (has_jac) v += c.dw[k][0] * g0 + c.dw[k][1] * g1 + c.dw[k][2] * g2;
-                        gt[c.idx[k] * F + ff] += v;
-                    }
-                }
-            }
-        }
+    switch (F) {
+        case 1: backward_all<1>(gf, gj, xp, mp, L, P, F, rows, part); break;
+        case 2: backward_all<2>(gf, gj, xp, mp, L, P, F, rows, part); break;
+        case 4: backward_all<4>(gf, gj, xp, mp, L, P, F, rows, part); break;
+        default: backward_all<0>(gf, gj, xp, mp, L, P, F, rows, part);
     }
     return nthreads == 1 ? partial[0] : partial.sum(0);
 }

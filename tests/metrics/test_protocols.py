@@ -9,6 +9,7 @@ from metrics.culling import (
     gt_bounding_box,
     points_in_frusta,
     render_depth_maps,
+    _touched_blocks,
     tsdf_refuse,
 )
 from metrics.dtu import DTUParams, dtu_chamfer, dtu_gt_points, radius_downsample, sample_mesh_dtu
@@ -79,6 +80,34 @@ def test_replica_prepared_gt_gives_identical_metrics(ring_cameras):
         prepared = prepare_replica_gt(gt, K, c2w, H, W, **kw)
         cached = evaluate_mesh_replica(pred, None, K, c2w, H, W, prepared_gt=prepared, **kw).as_dict()
         assert once == cached
+
+
+def test_tsdf_refuse_keeps_a_plane_seen_by_one_view():
+    """One camera, one fronto-parallel wall: the fused surface exists and lies on the wall (open3d's
+    VoxelBlockGrid drops voxels seen by < 3 frames by default; we keep every observed one)."""
+    K = np.array([[50.0, 0, 31.5], [0, 50.0, 23.5], [0, 0, 1]])
+    wall = trimesh.Trimesh([[-5, -5, 2.0], [5, -5, 2], [5, 5, 2], [-5, 5, 2]], [[0, 1, 2], [0, 2, 3]], process=False)
+    fused = tsdf_refuse(wall, K, np.eye(4)[None], 48, 64, voxel_size=0.02, sdf_trunc=0.06)
+    assert len(fused.faces) > 100
+    np.testing.assert_allclose(fused.vertices[:, 2], 2.0, atol=0.011)
+
+
+def test_touched_blocks_match_a_per_point_loop():
+    """The vectorised block touch (8 corners of each point's truncation cube, one int64 key per block)
+    equals a plain loop over points and their block ranges."""
+    rng = np.random.default_rng(0)
+    depth = rng.uniform(0.5, 3.0, (6, 8)) * (rng.random((6, 8)) > 0.2)
+    depth[0, 0] = 7.0  # beyond depth_trunc: ignored
+    K = np.array([[5.0, 0, 3.5], [0, 5.0, 2.5], [0, 0, 1]])
+    c2w = np.eye(4)
+    c2w[:3, 3] = [-1.3, 0.2, 0.7]
+    got = {tuple(b) for b in _touched_blocks(depth, K, c2w, 5.0, 0.06, 0.32).tolist()}
+    want = set()
+    for v, u in zip(*np.nonzero((depth > 0) & (depth <= 5.0))):
+        p = np.linalg.inv(K) @ np.array([u, v, 1.0]) * depth[v, u] + c2w[:3, 3]
+        lo, hi = np.floor((p - 0.06) / 0.32).astype(int), np.floor((p + 0.06) / 0.32).astype(int)
+        want |= {(x, y, z) for x in range(lo[0], hi[0] + 1) for y in range(lo[1], hi[1] + 1) for z in range(lo[2], hi[2] + 1)}
+    assert got == want and any(min(b) < 0 for b in got)
 
 
 def test_scannet_protocol(ring_cameras):
