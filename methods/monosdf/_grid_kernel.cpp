@@ -202,6 +202,57 @@ torch::Tensor grid_backward(torch::Tensor grad_feat, torch::Tensor grad_jac, tor
     return nthreads == 1 ? partial[0] : partial.sum(0);
 }
 
+// Jacobian contraction out[p, d] = sum_j J[p, d, j] g[p, j] (the grid's share of the SDF gradient) and
+// its backward, one pass each instead of PyTorch's broadcast multiply + sum (which materialise (P, 3, C)
+// products in both directions). J: (P, 3, C), g: (P, C), out / grad_out: (P, 3).
+torch::Tensor jacobian_contract_forward(torch::Tensor jac, torch::Tensor g) {
+    TORCH_CHECK(jac.dtype() == torch::kFloat32 && g.dtype() == torch::kFloat32, "float32 expected");
+    const int64_t P = jac.size(0), C = jac.size(2);
+    TORCH_CHECK(jac.size(1) == 3 && g.size(0) == P && g.size(1) == C, "jac (P, 3, C) and g (P, C) expected");
+    auto out = torch::empty({P, 3}, jac.options());
+    const float* jp = jac.data_ptr<float>();
+    const float* gp = g.data_ptr<float>();
+    float* op = out.data_ptr<float>();
+#pragma omp parallel for schedule(static)
+    for (int64_t p = 0; p < P; ++p) {
+        const float* gr = gp + p * C;
+        for (int d = 0; d < 3; ++d) {
+            const float* jr = jp + (p * 3 + d) * C;
+            float acc = 0.f;
+            for (int64_t j = 0; j < C; ++j) acc += jr[j] * gr[j];
+            op[p * 3 + d] = acc;
+        }
+    }
+    return out;
+}
+
+std::vector<torch::Tensor> jacobian_contract_backward(torch::Tensor jac, torch::Tensor g, torch::Tensor grad_out) {
+    const int64_t P = jac.size(0), C = jac.size(2);
+    auto grad_jac = torch::empty_like(jac);
+    auto grad_g = torch::empty_like(g);
+    const float* jp = jac.data_ptr<float>();
+    const float* gp = g.data_ptr<float>();
+    const float* gop = grad_out.data_ptr<float>();
+    float* gjp = grad_jac.data_ptr<float>();
+    float* ggp = grad_g.data_ptr<float>();
+#pragma omp parallel for schedule(static)
+    for (int64_t p = 0; p < P; ++p) {
+        const float* gr = gp + p * C;
+        const float o0 = gop[p * 3], o1 = gop[p * 3 + 1], o2 = gop[p * 3 + 2];
+        const float* j0 = jp + p * 3 * C;
+        const float* j1 = j0 + C;
+        const float* j2 = j1 + C;
+        float* gj = gjp + p * 3 * C;
+        for (int64_t j = 0; j < C; ++j) {
+            gj[j] = o0 * gr[j];
+            gj[C + j] = o1 * gr[j];
+            gj[2 * C + j] = o2 * gr[j];
+            ggp[p * C + j] = o0 * j0[j] + o1 * j1[j] + o2 * j2[j];
+        }
+    }
+    return {grad_jac, grad_g};
+}
+
 // Softplus(beta) and its slope sigmoid(beta z) in one pass (the SDF MLP needs both), and the fused
 // backward: grad_z = g_a * s + g_s * beta * s * (1 - s).
 std::vector<torch::Tensor> softplus_slope_forward(torch::Tensor z, double beta) {
@@ -249,4 +300,6 @@ PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
     m.def("softplus_slope_backward", &softplus_slope_backward, "fused backward of softplus_slope");
     m.def("forward", &grid_forward, "grid features + Jacobian");
     m.def("backward", &grid_backward, "grid table gradient");
+    m.def("jacobian_contract_forward", &jacobian_contract_forward, "sum_j J[p, d, j] g[p, j]");
+    m.def("jacobian_contract_backward", &jacobian_contract_backward, "gradients of jacobian_contract_forward");
 }

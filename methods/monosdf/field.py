@@ -24,7 +24,7 @@ import math
 import torch
 import torch.nn.functional as F
 
-from methods.monosdf.grid import FeatureGrid, GridSpec, _load_extension, fast_available
+from methods.monosdf.grid import FeatureGrid, GridSpec, _load_extension, fast_available, jacobian_contract
 
 SOFTPLUS_BETA = 100.0
 
@@ -120,7 +120,7 @@ class SDFNetwork(torch.nn.Module):
             for lin, slope in zip(reversed(self.linears[:-1]), reversed(slopes)):
                 g = (g * slope) @ lin.weight  # (P, in)
             c = jac.shape[-1]
-            grad = (jac * g[:, None, :c]).sum(-1) + g[:, c:]  # (P, 3); the 1/R and x R cancel
+            grad = jacobian_contract(jac, g[:, :c], self.grid.fast) + g[:, c:]  # (P, 3); the 1/R and x R cancel
         # bounding-sphere clamp (MonoSDF): every ray terminates inside the sphere
         norm = x.norm(dim=-1)
         sphere = self.radius - norm

@@ -181,6 +181,33 @@ class _GridFunction(torch.autograd.Function):
         return grad_table, None, None, None, None
 
 
+class _JacobianContract(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, jac: torch.Tensor, g: torch.Tensor):  # type: ignore[override]
+        jac, g = jac.contiguous(), g.contiguous()
+        ctx.save_for_backward(jac, g)
+        return _load_extension().jacobian_contract_forward(jac, g)
+
+    @staticmethod
+    def backward(ctx, grad_out: torch.Tensor):  # type: ignore[override]
+        jac, g = ctx.saved_tensors
+        grad_jac, grad_g = _load_extension().jacobian_contract_backward(jac, g, grad_out.contiguous())
+        return grad_jac, grad_g
+
+
+def jacobian_contract_reference(jac: torch.Tensor, g: torch.Tensor) -> torch.Tensor:
+    """``out[p, d] = sum_j jac[p, d, j] g[p, j]``: jac (P, 3, C), g (P, C) -> (P, 3). Plain PyTorch."""
+    return (jac * g[:, None, :]).sum(-1)
+
+
+def jacobian_contract(jac: torch.Tensor, g: torch.Tensor, fast: bool = True) -> torch.Tensor:
+    """:func:`jacobian_contract_reference` through one C++ pass per direction (PyTorch's broadcast
+    multiply + sum materialise (P, 3, C) products forward and backward: ~3.9 of a 32 ms step)."""
+    if fast and jac.dtype == torch.float32 and g.dtype == torch.float32 and fast_available():
+        return _JacobianContract.apply(jac, g)
+    return jacobian_contract_reference(jac, g)
+
+
 def fast_available() -> bool:
     """True if the C++ kernel compiled and loaded."""
     return _load_extension() is not None

@@ -72,7 +72,7 @@ class MonoSDFTrainer:
         self.optim = torch.optim.Adam([
             {"params": [self.sdf.grid.table], "lr": lr * cfg["grid_lr_factor"]},
             {"params": mlp_params + list(self.color.parameters()) + list(self.density.parameters()), "lr": lr},
-        ], betas=(0.9, 0.99), eps=1e-15)
+        ], betas=(0.9, 0.99), eps=1e-15, fused=True)
         self.base_lrs = [g["lr"] for g in self.optim.param_groups]
         self.step_count = 0
 

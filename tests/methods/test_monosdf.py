@@ -8,7 +8,15 @@ import torch
 
 from bench.errors import BenchInputError
 from methods.monosdf.field import LaplaceDensity, SDFNetwork, sdf_gradient_autograd
-from methods.monosdf.grid import FeatureGrid, fast_available, interpolate_fast, interpolate_reference, make_grid_spec
+from methods.monosdf.grid import (
+    FeatureGrid,
+    fast_available,
+    interpolate_fast,
+    interpolate_reference,
+    jacobian_contract,
+    jacobian_contract_reference,
+    make_grid_spec,
+)
 from methods.monosdf.losses import normal_loss, solve_scale_shift, ssi_depth_loss
 from methods.monosdf.render import composite_weights, sample_pdf
 from methods.registry import method_config
@@ -40,6 +48,18 @@ def test_grid_kernel_matches_reference_values_jacobian_and_table_gradient():
     g_ref = torch.autograd.grad((f_ref * gf).sum() + (j_ref * gj).sum(), grid.table)[0]
     g_fast = torch.autograd.grad((f_fast * gf).sum() + (j_fast * gj).sum(), grid.table)[0]
     torch.testing.assert_close(g_fast, g_ref, atol=1e-3, rtol=1e-4)
+
+
+@pytest.mark.skipif(not fast_available(), reason="no C++ compiler")
+def test_jacobian_contraction_kernel_matches_reference_value_and_gradients():
+    jac = torch.randn(1000, 3, 16, requires_grad=True)
+    g = torch.randn(1000, 16, requires_grad=True)
+    w = torch.randn(1000, 3)
+    ref = jacobian_contract_reference(jac, g)
+    fast = jacobian_contract(jac, g)
+    torch.testing.assert_close(fast, ref, atol=1e-5, rtol=1e-5)
+    for a, b in zip(torch.autograd.grad((fast * w).sum(), [jac, g]), torch.autograd.grad((ref * w).sum(), [jac, g])):
+        torch.testing.assert_close(a, b, atol=1e-5, rtol=1e-5)
 
 
 def test_reference_jacobian_matches_finite_differences():
