@@ -77,7 +77,7 @@ def point_metrics(
     threshold: float = 0.05,
     pred_normals: Any | None = None,
     gt_normals: Any | None = None,
-    backend: Backend = "scipy",
+    backend: Backend = "open3d",
 ) -> MeshMetrics:
     """Accuracy, completion, Chamfer-L1, precision, recall, F-score and normal consistency.
 
@@ -224,7 +224,7 @@ def evaluate_mesh_pair(
     n_samples: int = 200_000,
     threshold: float = 0.05,
     seed: int = 0,
-    backend: Backend = "scipy",
+    backend: Backend = "open3d",
     gt_seed: int | None = None,
 ) -> MeshMetrics:
     """Sample both meshes (``n_samples`` each, seeded) and compute :func:`point_metrics` with normals.

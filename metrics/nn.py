@@ -1,16 +1,18 @@
 """Nearest-neighbour distances between point clouds: a fast path and its brute-force twin.
 
-The fast path is scipy's ``cKDTree`` queried with ``workers=-1`` (all cores), exact in float64. It was
-chosen by measurement on the 2-core machine: the full ``point_metrics`` on 2 x 200k points (both
-directions + N.C.) takes ~0.48 s with cKDTree vs ~0.56 s with open3d's float64
-``NearestNeighborSearch`` (``benchmarks/bench_mesh_metrics.py``); open3d float32 is close to cKDTree
-but rounds coordinates. cKDTree matches the brute-force twin to 1e-12.
-``backend="open3d"`` stays available; ``backend="brute"`` is the obviously-correct reference used by the
-tests (O(N M) in chunks, only for small clouds).
+The default is open3d's float64 ``NearestNeighborSearch`` (a KD-tree, exact). It was chosen by
+measurement on this machine (``benchmarks/bench_mesh_metrics.py``, one thread, 2 x 200k points, both
+directions + N.C.): scipy's ``cKDTree`` is a little faster when the prediction lies on the GT (0.40 vs
+0.45 s) but 3.8x slower when half of it is floaters far from any GT point (4.9 vs 1.3 s), which is what
+an unconverged or prior-free SDF produces; a no-prior Replica snapshot took 3.1 s with cKDTree and 1.2 s
+with open3d. ``backend="scipy"`` stays available (matches the brute-force twin to 1e-12, as does
+open3d); ``backend="brute"`` is the obviously-correct reference used by the tests (O(N M) in chunks,
+only for small clouds).
 """
 
 from __future__ import annotations
 
+import os
 from typing import Any, Literal
 
 import numpy as np
@@ -48,7 +50,7 @@ def nearest_neighbor_bruteforce(
 
 
 def nearest_neighbor(
-    query: Any, reference: Any, backend: Backend = "scipy", workers: int = -1
+    query: Any, reference: Any, backend: Backend = "open3d", workers: int | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Distance from every query point to its nearest reference point.
 
@@ -57,8 +59,9 @@ def nearest_neighbor(
     Args:
         query: (M, 3) points (numpy or torch; float32 / float64 / int), finite, M >= 1.
         reference: (N, 3) points in the same unit, finite, N >= 1.
-        backend: ``"scipy"`` (cKDTree, default), ``"open3d"`` (float64 open3d.core NNS) or ``"brute"``.
-        workers: threads for the scipy query (-1 = all cores).
+        backend: ``"open3d"`` (float64 open3d.core NNS, default), ``"scipy"`` (cKDTree) or ``"brute"``.
+        workers: threads for the scipy query (-1 = all cores; None = ``OMP_NUM_THREADS`` when set, as in a
+            ``bench run`` worker, else all cores). open3d follows ``open3d.utility.set_max_threads``.
 
     Returns:
         distances (M,) float64 in the unit of the inputs, indices (M,) int64 into ``reference``.
@@ -76,6 +79,8 @@ def nearest_neighbor(
     if backend == "scipy":
         from scipy.spatial import cKDTree
 
+        if workers is None:
+            workers = int(os.environ.get("OMP_NUM_THREADS", "-1") or -1)
         tree = cKDTree(r, balanced_tree=False, compact_nodes=False)
         d, i = tree.query(q, k=1, workers=workers)
         return np.asarray(d, dtype=np.float64), np.asarray(i, dtype=np.int64)

@@ -114,7 +114,7 @@ def evaluate_mesh_replica(
     occlusion_tol: float = 0.02,
     max_edge: float = 0.05,
     seed: int = 0,
-    backend: Backend = "scipy",
+    backend: Backend = "open3d",
     prepared_gt: ReplicaGT | None = None,
 ) -> MeshMetrics:
     """Replica protocol (MonoSDF ``replica_eval``): cull, crop, sample 200k, metrics with N.C.
@@ -176,7 +176,7 @@ def evaluate_mesh_scannet(
     tsdf_trunc: float = 0.03,
     depth_trunc: float = 5.0,
     refuse_gt: bool = True,
-    backend: Backend = "scipy",
+    backend: Backend = "open3d",
 ) -> MeshMetrics:
     """ScanNet protocol (MonoSDF ``scannet_eval``): TSDF re-fusion, 2 cm voxel downsampling, metrics.
 
