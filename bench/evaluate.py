@@ -41,7 +41,7 @@ def _mesh_metrics(result: Any) -> dict[str, float]:
 
 
 _GT_CACHE: dict[tuple, Any] = {}  # GT-side work per scene: identical for every snapshot of a job
-_GT_CACHE_SIZE = 5
+_GT_CACHE_SIZE = 8
 
 
 def _cached_gt(protocol: str, scene: Scene, params: dict[str, Any], extra: tuple, compute: Callable[[], Any]) -> Any:
@@ -64,12 +64,15 @@ def _refused_gt(scene: Scene, views: np.ndarray, params: dict[str, Any]) -> Any:
 
 
 def _replica_gt(scene: Scene, views: np.ndarray, params: dict[str, Any], seed: int) -> Any:
-    from metrics.protocols import prepare_replica_gt
+    """The Replica GT side: the culled GT surface once per scene (seed-independent: ~4 s at one thread),
+    its samples once per seed."""
+    from metrics.protocols import cull_replica_gt, sample_replica_gt
 
-    gt_params = {k: v for k, v in params.items() if k != "threshold"}
-    return _cached_gt("replica", scene, params, (tuple(int(v) for v in views), seed), lambda: prepare_replica_gt(
-        scene.load_gt_mesh(), scene.intrinsics[views], scene.cam_to_world[views], scene.height, scene.width,
-        seed=seed, **gt_params))
+    cams = tuple(int(v) for v in views)
+    cull_params = {k: v for k, v in params.items() if k not in ("threshold", "n_samples")}
+    surface = _cached_gt("replica", scene, params, (cams,), lambda: cull_replica_gt(
+        scene.load_gt_mesh(), scene.intrinsics[views], scene.cam_to_world[views], scene.height, scene.width, **cull_params))
+    return _cached_gt("replica", scene, params, (cams, seed), lambda: sample_replica_gt(surface, int(params.get("n_samples", 200_000)), seed))
 
 
 def _crop_to_box(mesh: Any, lo: np.ndarray, hi: np.ndarray) -> Any:

@@ -543,21 +543,55 @@ def _claims_markdown(report: TableReport) -> str:
     return "\n".join(lines)
 
 
+CURVE_COLUMNS = ["table", "row", "group", "fraction", "iterations", "seconds", "metric", "mean", "std", "n"]
+
+
+def curve_table(report: TableReport) -> pd.DataFrame:
+    """Accuracy along the schedule, tidy: one line per (row, group, snapshot fraction, metric column)
+    with the mean iterations and mean wall seconds of that snapshot (setup + training so far + its mesh
+    extraction) and the metric's mean / sample std (ddof=1) / count over the scene x seed jobs that
+    evaluated it (an early snapshot without metrics, e.g. an empty mesh, is left out). Columns:
+    :data:`CURVE_COLUMNS`. The ``<table>_curve.csv`` output and the plot both come from this."""
+    lines = []
+    ok = report.jobs[report.jobs["status"] == "ok"] if len(report.jobs) else report.jobs
+    for g in report.spec.groups:
+        keys = [c.key for c in g.columns if not c.paper_only]
+        sub_g = ok[ok["gid"] == g.id] if len(ok) else ok
+        for label, sub in (sub_g.groupby("row", sort=False) if len(sub_g) else []):
+            pts = [{"fraction": p.get("fraction"), "iterations": p.get("iterations"), "seconds": p.get("seconds"),
+                    **{k: (p.get("metrics") or {}).get(k) for k in keys}}
+                   for curve in sub["curve"] for p in curve if isinstance(p, dict) and isinstance(p.get("metrics") or {}, dict)]
+            if not pts:
+                continue
+            cdf = pd.DataFrame(pts).apply(pd.to_numeric, errors="coerce").dropna(subset=["fraction", "seconds"])
+            for frac, at in cdf.groupby("fraction", sort=True):
+                for k in keys:
+                    v = at[k].dropna()
+                    if not len(v):
+                        continue
+                    lines.append({"table": report.spec.name, "row": str(label), "group": g.id, "fraction": float(frac),
+                                  "iterations": float(at["iterations"].mean()), "seconds": float(at["seconds"].mean()),
+                                  "metric": k, "mean": float(v.mean()), "std": float(v.std(ddof=1)) if len(v) > 1 else float("nan"),
+                                  "n": int(len(v))})
+    return pd.DataFrame(lines, columns=CURVE_COLUMNS)
+
+
 def _curves(report: TableReport, gid: str, key: str) -> dict[str, tuple[list[float], list[float], tuple[float, float] | None]]:
-    """Per row: mean (seconds, metric) per curve fraction, and the mean final (total s, metric) point."""
+    """Per row: mean (seconds, metric) per curve fraction (from :func:`curve_table`), and the mean final
+    (total s, metric) point."""
     out = {}
+    curves = curve_table(report)
+    curves = curves[(curves["group"] == gid) & (curves["metric"] == key)].sort_values("fraction")
     ok = report.jobs[(report.jobs["status"] == "ok") & (report.jobs["gid"] == gid)]
     for label, sub in ok.groupby("row", sort=False):
-        pts = [(p.get("fraction"), p.get("seconds"), (p.get("metrics") or {}).get(key))
-               for curve in sub["curve"] for p in curve if isinstance(p, dict) and isinstance(p.get("metrics") or {}, dict)]
-        cdf = pd.DataFrame(pts, columns=["fraction", "seconds", "v"]).apply(pd.to_numeric, errors="coerce").dropna()
-        agg = cdf.groupby("fraction")[["seconds", "v"]].mean().sort_index()
+        c = curves[curves["row"] == str(label)]
         total = pd.to_numeric(sub["timings"].map(lambda t: t.get("total")), errors="coerce")
         final = pd.to_numeric(sub["metrics"].map(lambda m: m.get(key)), errors="coerce")
         both = pd.DataFrame({"t": total, "v": final}).dropna()
         end = (float(both["t"].mean()), float(both["v"].mean())) if len(both) else None
-        out[str(label)] = (agg["seconds"].tolist(), agg["v"].tolist(), end)
-    return out
+        out[str(label)] = (c["seconds"].tolist(), c["mean"].tolist(), end)
+    order = [r.label for r in report.spec.rows]
+    return dict(sorted(out.items(), key=lambda kv: order.index(kv[0]) if kv[0] in order else len(order)))
 
 
 def plot_accuracy_vs_time(report: TableReport) -> bytes:
@@ -571,10 +605,11 @@ def plot_accuracy_vs_time(report: TableReport) -> bytes:
     FigureCanvasAgg(fig)
     for i, g in enumerate(groups):
         ax = fig.add_subplot(1, len(groups), i + 1)
+        colours = {r.label: f"C{k % 10}" for k, r in enumerate(report.spec.rows)}  # one colour per row in every panel
         for label, (xs, ys, end) in _curves(report, g.id, main.key).items():
-            line = ax.plot(xs, ys, marker=".", label=label)[0] if xs else None
+            line = ax.plot(xs, ys, marker=".", label=label, color=colours.get(label))[0] if xs else None
             if end is not None:
-                ax.plot([end[0]], [end[1]], marker="o", linestyle="", color=line.get_color() if line else None,
+                ax.plot([end[0]], [end[1]], marker="o", linestyle="", color=colours.get(label),
                         label=None if line else label)
         ax.set_xlabel("wall time [s]")
         ax.set_ylabel(f"{main.label} ({'higher' if main.direction == 'higher' else 'lower'} is better)")
@@ -591,13 +626,15 @@ def plot_accuracy_vs_time(report: TableReport) -> bytes:
 
 
 def write_table_outputs(report: TableReport, out_dir: str | Path) -> dict[str, Path]:
-    """Write ``<table>.csv``, ``<table>_time.csv``, ``<table>.md`` and ``<table>_accuracy_vs_time.png``
-    atomically into ``out_dir``; returns the paths by kind."""
+    """Write ``<table>.csv``, ``<table>_time.csv``, ``<table>_curve.csv`` (accuracy along the schedule,
+    :func:`curve_table`), ``<table>.md`` and ``<table>_accuracy_vs_time.png`` atomically into
+    ``out_dir``; returns the paths by kind."""
     out, name = Path(out_dir), report.spec.name
-    paths = {"csv": out / f"{name}.csv", "time_csv": out / f"{name}_time.csv", "md": out / f"{name}.md",
-             "png": out / f"{name}_accuracy_vs_time.png"}
+    paths = {"csv": out / f"{name}.csv", "time_csv": out / f"{name}_time.csv", "curve_csv": out / f"{name}_curve.csv",
+             "md": out / f"{name}.md", "png": out / f"{name}_accuracy_vs_time.png"}
     atomic_write_text(paths["csv"], report.tidy.to_csv(index=False))
     atomic_write_text(paths["time_csv"], report.timing.to_csv(index=False))
+    atomic_write_text(paths["curve_csv"], curve_table(report).to_csv(index=False))
     atomic_write_text(paths["md"], to_markdown(report, heading_level=1)
                       + f"\n![accuracy vs time]({paths['png'].name})\n")
     atomic_write_bytes(paths["png"], plot_accuracy_vs_time(report))

@@ -53,17 +53,65 @@ def _nonempty(mesh: Any, what: str) -> Any:
 
 
 @dataclass(frozen=True)
+class ReplicaGTSurface:
+    """The seed-independent GT side of the Replica protocol (steps 1-3): the GT depth maps used to cull
+    pred (N, H, W, metres; None with ``gt_visibility="frustum"``), the GT's oriented box (``to_box``
+    (4, 4), ``half`` (3,) metres) and the culled GT mesh (``mesh``, world metres)."""
+
+    depth_maps: np.ndarray | None
+    to_box: np.ndarray
+    half: np.ndarray
+    mesh: Any
+
+
+@dataclass(frozen=True)
 class ReplicaGT:
-    """The GT side of the Replica protocol, computed once per (scene, cameras, parameters, seed):
-    the GT depth maps used to cull pred (N, H, W, metres; None with ``gt_visibility="frustum"``), the
-    GT's oriented box (``to_box`` (4, 4), ``half`` (3,) metres) and its surface samples / normals
-    (``points``, ``normals``: (n_samples, 3))."""
+    """The GT side of the Replica protocol for one sampling seed: the :class:`ReplicaGTSurface` fields
+    plus its surface samples / normals (``points``, ``normals``: (n_samples, 3))."""
 
     depth_maps: np.ndarray | None
     to_box: np.ndarray
     half: np.ndarray
     points: np.ndarray
     normals: np.ndarray
+
+
+def cull_replica_gt(
+    gt_mesh: Any,
+    K: Any,
+    cam_to_world: Any,
+    H: int,
+    W: int,
+    bbox_scale: float = 1.05,
+    gt_visibility: Literal["visible", "frustum"] = "visible",
+    occlusion_tol: float = 0.02,
+    max_edge: float = 0.05,
+) -> ReplicaGTSurface:
+    """Steps 1-3 of the Replica protocol for the GT mesh (subdivide, cull, oriented box): everything
+    but the seeded sampling, so one result serves every seed of a scene (arguments as
+    :func:`evaluate_mesh_replica`)."""
+    Km, c2w, h, w = as_cameras(K, cam_to_world, H, W)
+    clean_mesh(gt_mesh, "gt_mesh")
+    if gt_visibility not in ("visible", "frustum"):
+        raise ValueError(f"gt_visibility must be 'visible' or 'frustum', got {gt_visibility!r}")
+    gt = subdivide_mesh(gt_mesh, max_edge)
+    depth = None
+    if gt_visibility == "visible":
+        depth = render_depth_maps(gt, Km, c2w, h, w)
+        gt = cull_mesh_to_visible(gt, Km, c2w, h, w, depth_maps=depth, tol=occlusion_tol)
+    else:
+        gt = cull_mesh_to_frusta(gt, Km, c2w, h, w)
+    _nonempty(gt, "gt_mesh")
+    to_box, half = gt_bounding_box(gt, bbox_scale)
+    return ReplicaGTSurface(depth, to_box, half, gt)
+
+
+def sample_replica_gt(surface: ReplicaGTSurface, n_samples: int = 200_000, seed: int = 0) -> ReplicaGT:
+    """Step 4 for the GT: ``n_samples`` surface samples of the culled GT with seed ``seed + 1``
+    (independent of pred's samples, as MonoSDF)."""
+    check_int(n_samples, "n_samples")
+    gp, gn = sample_mesh_surface(surface.mesh, n_samples, seed=seed + 1)
+    return ReplicaGT(surface.depth_maps, surface.to_box, surface.half, gp, gn)
 
 
 def prepare_replica_gt(
@@ -81,23 +129,11 @@ def prepare_replica_gt(
 ) -> ReplicaGT:
     """Steps 1-4 of the Replica protocol for the GT mesh (see the module docstring); the arguments are
     those of :func:`evaluate_mesh_replica`. Reusing the result across snapshots of one scene gives
-    identical metrics at a fraction of the cost (the GT work dominates one evaluation)."""
-    Km, c2w, h, w = as_cameras(K, cam_to_world, H, W)
-    clean_mesh(gt_mesh, "gt_mesh")
-    check_int(n_samples, "n_samples")
-    if gt_visibility not in ("visible", "frustum"):
-        raise ValueError(f"gt_visibility must be 'visible' or 'frustum', got {gt_visibility!r}")
-    gt = subdivide_mesh(gt_mesh, max_edge)
-    depth = None
-    if gt_visibility == "visible":
-        depth = render_depth_maps(gt, Km, c2w, h, w)
-        gt = cull_mesh_to_visible(gt, Km, c2w, h, w, depth_maps=depth, tol=occlusion_tol)
-    else:
-        gt = cull_mesh_to_frusta(gt, Km, c2w, h, w)
-    _nonempty(gt, "gt_mesh")
-    to_box, half = gt_bounding_box(gt, bbox_scale)
-    gp, gn = sample_mesh_surface(gt, n_samples, seed=seed + 1)
-    return ReplicaGT(depth, to_box, half, gp, gn)
+    identical metrics at a fraction of the cost (the GT work dominates one evaluation);
+    :func:`cull_replica_gt` + :func:`sample_replica_gt` split it where the seed enters."""
+    surface = cull_replica_gt(gt_mesh, K, cam_to_world, H, W, bbox_scale=bbox_scale, gt_visibility=gt_visibility,
+                              occlusion_tol=occlusion_tol, max_edge=max_edge)
+    return sample_replica_gt(surface, n_samples, seed)
 
 
 def evaluate_mesh_replica(

@@ -28,7 +28,8 @@ class RenderOutput:
     Attributes:
         rgb: (R, 3); depth: (R,) z-depth in normalised units; normal: (R, 3) camera frame (not
         normalised); acc: (R,) sum of weights; weights: (R, S); grad: (R, S, 3) SDF gradients at the
-        samples; sdf: (R, S).
+        samples; sdf: (R, S); t: (R, S) sample distances; extra_grad: (E, 3) SDF gradients at the
+        ``extra_points`` (None without).
     """
 
     rgb: torch.Tensor
@@ -39,6 +40,7 @@ class RenderOutput:
     grad: torch.Tensor
     sdf: torch.Tensor
     t: torch.Tensor
+    extra_grad: torch.Tensor | None = None
 
 
 def composite_weights(sdf: torch.Tensor, t: torch.Tensor, density: LaplaceDensity, beta: torch.Tensor | None = None) -> torch.Tensor:
@@ -139,6 +141,7 @@ def render_rays(
     n_fine: int,
     gen: torch.Generator | None = None,
     jitter: bool = True,
+    extra_points: torch.Tensor | None = None,
 ) -> RenderOutput:
     """Render R rays.
 
@@ -146,6 +149,9 @@ def render_rays(
         origins: (R, 3) or (3,); dirs: (R, 3) unit; z_factor, far: (R,); world_to_cam: (3, 3) or (R, 3, 3).
         near: near distance (normalised units). n_coarse, n_fine: samples (see module docstring).
         gen: random generator for stratification (None = global). jitter: stratified jitter (training).
+        extra_points: (E, 3) points whose SDF gradients are wanted too (the eikonal term's uniform
+            points): evaluated in the same SDF pass as the samples (one grid call and one table-sized
+            gradient buffer instead of two), returned in ``RenderOutput.extra_grad``.
     """
     R = dirs.shape[0]
     origins = origins.expand(R, 3)
@@ -153,8 +159,12 @@ def render_rays(
     S = t.shape[1]
     pts = origins[:, None, :] + dirs[:, None, :] * t[..., None]
     flat = pts.reshape(-1, 3)
-    sdf, geo, grad = sdf_net(flat, with_gradient=True)
+    n_extra = 0 if extra_points is None else int(extra_points.shape[0])
+    sdf, geo, grad = sdf_net(flat if extra_points is None else torch.cat([flat, extra_points]), with_gradient=True)
     assert grad is not None
+    extra_grad = grad[R * S:] if n_extra else None
+    if n_extra:
+        sdf, geo, grad = sdf[: R * S], geo[: R * S], grad[: R * S]
     normals = F.normalize(grad, dim=-1, eps=1e-8)
     view = dirs[:, None, :].expand(R, S, 3).reshape(-1, 3)
     rgb_s = color_net(flat, view, normals, geo).reshape(R, S, 3)
@@ -168,4 +178,5 @@ def render_rays(
         n_cam = n_world @ world_to_cam.T
     else:
         n_cam = torch.einsum("rij,rj->ri", world_to_cam, n_world)
-    return RenderOutput(rgb=rgb, depth=depth, normal=n_cam, acc=acc, weights=w, grad=grad.reshape(R, S, 3), sdf=sdf, t=t)
+    return RenderOutput(rgb=rgb, depth=depth, normal=n_cam, acc=acc, weights=w, grad=grad.reshape(R, S, 3), sdf=sdf, t=t,
+                        extra_grad=extra_grad)

@@ -82,12 +82,13 @@ class MonoSDFTrainer:
         return torch.from_numpy(np.ascontiguousarray(arr[self.views]).reshape(shape).astype(np.float32))
 
     # ------------------------------------------------------------------ one step
-    def render_pixels(self, view: int, pixels: torch.Tensor, jitter: bool = True) -> RenderOutput:
-        """Render ``pixels`` (flat indices) of training view slot ``view`` (0..V-1)."""
+    def render_pixels(self, view: int, pixels: torch.Tensor, jitter: bool = True, extra_points: torch.Tensor | None = None) -> RenderOutput:
+        """Render ``pixels`` (flat indices) of training view slot ``view`` (0..V-1); ``extra_points``
+        (E, 3): also their SDF gradients (``RenderOutput.extra_grad``)."""
         r = self.rays
         return render_rays(self.sdf, self.color, self.density, r.origins[view], r.dirs[view, pixels], r.z_factor[view, pixels],
                            r.far[view, pixels], r.world_to_cam_rot[view], self.cfg["near"], self.cfg["n_coarse"], self.cfg["n_fine"],
-                           self.gen, jitter)
+                           self.gen, jitter, extra_points=extra_points)
 
     def _set_lr(self) -> None:
         frac = min(self.step_count / max(int(self.cfg["iterations"]), 1), 1.0)
@@ -101,13 +102,14 @@ class MonoSDFTrainer:
         if view is None:
             view = int(torch.randint(0, len(self.views), (1,), generator=self.gen))
         pixels = self.pixel_sampler(view, int(cfg["rays_per_batch"]), self.gen)
-        out = self.render_pixels(view, pixels)
-        terms: dict[str, tuple[float, torch.Tensor]] = {"color": (float(cfg["color_weight"]), color_loss(out.rgb, self.rgb[view, pixels]))}
-
-        # eikonal: uniform points in the bounding cube + the highest-weight sample of each ray (MonoSDF)
+        # eikonal: uniform points in the bounding cube (their gradients come from the rendering's SDF
+        # pass) + the highest-weight sample of each ray (MonoSDF)
         n_uni = int(cfg["rays_per_batch"])
         uni = (torch.rand(n_uni, 3, generator=self.gen) * 2 - 1) * self.radius
-        _, _, g_uni = self.sdf(uni, with_gradient=True)
+        out = self.render_pixels(view, pixels, extra_points=uni)
+        terms: dict[str, tuple[float, torch.Tensor]] = {"color": (float(cfg["color_weight"]), color_loss(out.rgb, self.rgb[view, pixels]))}
+        g_uni = out.extra_grad
+        assert g_uni is not None
         best = out.weights.detach().argmax(-1)
         g_surf = out.grad[torch.arange(out.grad.shape[0]), best]
         terms["eikonal"] = (float(cfg["eikonal_weight"]), eikonal_loss(torch.cat([g_uni, g_surf])))

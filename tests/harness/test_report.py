@@ -169,7 +169,7 @@ def test_outputs_written_atomically(spec: TableSpec, results: Path, tmp_path: Pa
     rep = build_table(spec, collect_results(results), "small", available_methods={"mi"})
     paths = write_table_outputs(rep, out)
     assert sorted(p.name for p in out.iterdir()) == sorted(
-        ["abl.csv", "abl.md", "abl_time.csv", "abl_accuracy_vs_time.png"])  # no temp files left
+        ["abl.csv", "abl.md", "abl_time.csv", "abl_curve.csv", "abl_accuracy_vs_time.png"])  # no temp files left
     assert paths["png"].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     tidy = pd.read_csv(paths["csv"])
     assert list(tidy.columns[:6]) == ["table", "row", "group", "dataset", "metric", "source"]
@@ -185,6 +185,12 @@ def test_outputs_written_atomically(spec: TableSpec, results: Path, tmp_path: Pa
     assert total == pytest.approx(13.0)
     assert {"data", "train", "total", "iterations"} <= set(time["quantity"])
     assert "| **Full**" in paths["md"].read_text()
+    curve = pd.read_csv(paths["curve_csv"])
+    full = curve[(curve["row"] == "Full") & (curve["metric"] == "fscore")]
+    assert full[["fraction", "iterations", "seconds", "n"]].values.tolist() == [[0.5, 50, 6.0, 6]]
+    full_jobs = rep.jobs[(rep.jobs["row"] == "Full") & (rep.jobs["status"] == "ok")]
+    assert full["mean"].iloc[0] == pytest.approx(full_jobs["metrics"].map(lambda m: m["fscore"] / 2).mean())
+    assert curve[(curve["row"] == "Base") & (curve["metric"] == "fscore")]["n"].tolist() == [5]  # the failed job has no curve
 
 
 def test_render_report_and_empty_results(spec: TableSpec, tmp_path: Path) -> None:
