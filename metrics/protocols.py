@@ -114,28 +114,6 @@ def sample_replica_gt(surface: ReplicaGTSurface, n_samples: int = 200_000, seed:
     return ReplicaGT(surface.depth_maps, surface.to_box, surface.half, gp, gn)
 
 
-def prepare_replica_gt(
-    gt_mesh: Any,
-    K: Any,
-    cam_to_world: Any,
-    H: int,
-    W: int,
-    n_samples: int = 200_000,
-    bbox_scale: float = 1.05,
-    gt_visibility: Literal["visible", "frustum"] = "visible",
-    occlusion_tol: float = 0.02,
-    max_edge: float = 0.05,
-    seed: int = 0,
-) -> ReplicaGT:
-    """Steps 1-4 of the Replica protocol for the GT mesh (see the module docstring); the arguments are
-    those of :func:`evaluate_mesh_replica`. Reusing the result across snapshots of one scene gives
-    identical metrics at a fraction of the cost (the GT work dominates one evaluation);
-    :func:`cull_replica_gt` + :func:`sample_replica_gt` split it where the seed enters."""
-    surface = cull_replica_gt(gt_mesh, K, cam_to_world, H, W, bbox_scale=bbox_scale, gt_visibility=gt_visibility,
-                              occlusion_tol=occlusion_tol, max_edge=max_edge)
-    return sample_replica_gt(surface, n_samples, seed)
-
-
 def evaluate_mesh_replica(
     pred_mesh: Any,
     gt_mesh: Any,
@@ -169,8 +147,8 @@ def evaluate_mesh_replica(
         max_edge: faces are subdivided to this edge length before vertex-based culling, metres.
         seed: sampling seed of pred (GT uses ``seed + 1``: independent samples, as MonoSDF).
         backend: nearest-neighbour backend.
-        prepared_gt: the GT side from :func:`prepare_replica_gt` with the same cameras and
-            parameters (a cache; None computes it here).
+        prepared_gt: the GT side from :func:`cull_replica_gt` + :func:`sample_replica_gt` with the same
+            cameras, parameters and seed (a cache; None computes it here).
 
     Returns:
         :class:`MeshMetrics` with normal consistency.
@@ -182,9 +160,9 @@ def evaluate_mesh_replica(
     clean_mesh(pred_mesh, "pred_mesh")
     check_positive(threshold, "threshold")
     if prepared_gt is None:
-        prepared_gt = prepare_replica_gt(gt_mesh, Km, c2w, h, w, n_samples=n_samples, bbox_scale=bbox_scale,
-                                         gt_visibility=gt_visibility, occlusion_tol=occlusion_tol,
-                                         max_edge=max_edge, seed=seed)
+        surface = cull_replica_gt(gt_mesh, Km, c2w, h, w, bbox_scale=bbox_scale, gt_visibility=gt_visibility,
+                                  occlusion_tol=occlusion_tol, max_edge=max_edge)
+        prepared_gt = sample_replica_gt(surface, n_samples, seed)
     check_int(n_samples, "n_samples")
     pred = subdivide_mesh(pred_mesh, max_edge)
     if prepared_gt.depth_maps is not None:

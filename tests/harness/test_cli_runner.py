@@ -143,3 +143,14 @@ def test_cli_scenes_make_then_load(tmp_path, capsys):
     assert scene.source_format == "dtu" and len(scene.view_indices("train")) == 3
     # the output exists now: making it again without --overwrite is a clear error
     assert main(["scenes", "make", "dtu_like_0", "--out", str(tmp_path / "dtu"), "--scale", "tiny"]) == 2
+
+
+def test_jobs_that_train_run_before_fusion_only_jobs():
+    """The oracle's short fusion-only jobs go last (they fill the tail); otherwise plan order is kept."""
+    from types import SimpleNamespace
+
+    from bench.runner import training_first
+
+    jobs = [SimpleNamespace(config={}, job_id="oracle"), SimpleNamespace(config={"iterations": 600}, job_id="sdf1"),
+            SimpleNamespace(config={"voxel_size": 0.02}, job_id="oracle2"), SimpleNamespace(config={"iterations": 300}, job_id="gs")]
+    assert [j.job_id for j in training_first(jobs)] == ["sdf1", "gs", "oracle", "oracle2"]

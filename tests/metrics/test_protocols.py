@@ -13,7 +13,7 @@ from metrics.culling import (
     tsdf_refuse,
 )
 from metrics.dtu import DTUParams, dtu_chamfer, dtu_gt_points, radius_downsample, sample_mesh_dtu
-from metrics.protocols import evaluate_mesh_replica, evaluate_mesh_scannet, prepare_replica_gt
+from metrics.protocols import cull_replica_gt, evaluate_mesh_replica, evaluate_mesh_scannet, sample_replica_gt
 
 
 def test_frustum_test_and_depth_rendering_are_z_depth():
@@ -70,16 +70,19 @@ def test_replica_protocol_identical_and_shifted(ring_cameras):
 
 
 def test_replica_prepared_gt_gives_identical_metrics(ring_cameras):
-    """The GT-side cache (prepare once, evaluate many snapshots) is exactly the one-shot protocol."""
+    """The GT-side cache (the culled surface once per scene, its samples once per seed, evaluate many
+    snapshots) is exactly the one-shot protocol, for every seed."""
     K, c2w, H, W = ring_cameras
     gt = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
     pred = trimesh.creation.box(extents=(1.04, 1.0, 0.98))
     for visibility in ("visible", "frustum"):
-        kw = dict(n_samples=20_000, gt_visibility=visibility, seed=3)
-        once = evaluate_mesh_replica(pred, gt, K, c2w, H, W, **kw).as_dict()
-        prepared = prepare_replica_gt(gt, K, c2w, H, W, **kw)
-        cached = evaluate_mesh_replica(pred, None, K, c2w, H, W, prepared_gt=prepared, **kw).as_dict()
-        assert once == cached
+        surface = cull_replica_gt(gt, K, c2w, H, W, gt_visibility=visibility)
+        for seed in (3, 4):
+            kw = dict(n_samples=20_000, gt_visibility=visibility, seed=seed)
+            once = evaluate_mesh_replica(pred, gt, K, c2w, H, W, **kw).as_dict()
+            prepared = sample_replica_gt(surface, 20_000, seed)
+            cached = evaluate_mesh_replica(pred, None, K, c2w, H, W, prepared_gt=prepared, **kw).as_dict()
+            assert once == cached
 
 
 def test_tsdf_refuse_keeps_a_plane_seen_by_one_view():
