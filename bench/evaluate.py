@@ -46,7 +46,8 @@ _GT_CACHE_SIZE = 8
 
 def _cached_gt(protocol: str, scene: Scene, params: dict[str, Any], extra: tuple, compute: Callable[[], Any]) -> Any:
     """``compute()`` once per (protocol, scene, parameters, ``extra``): the GT side of an evaluation,
-    reused by every snapshot of the job (the cache holds at most :data:`_GT_CACHE_SIZE` scenes)."""
+    reused by every snapshot of the job (the cache holds at most :data:`_GT_CACHE_SIZE` entries; a
+    Replica scene takes one for its culled surface and one per seed for the samples)."""
     key = (protocol, str(scene.root or scene.name), tuple(sorted(params.items())), extra)
     if key not in _GT_CACHE:
         if len(_GT_CACHE) >= _GT_CACHE_SIZE:

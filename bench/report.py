@@ -576,11 +576,10 @@ def curve_table(report: TableReport) -> pd.DataFrame:
     return pd.DataFrame(lines, columns=CURVE_COLUMNS)
 
 
-def _curves(report: TableReport, gid: str, key: str) -> dict[str, tuple[list[float], list[float], tuple[float, float] | None]]:
-    """Per row: mean (seconds, metric) per curve fraction (from :func:`curve_table`), and the mean final
-    (total s, metric) point."""
+def _curves(report: TableReport, curves: pd.DataFrame, gid: str, key: str) -> dict[str, tuple[list[float], list[float], tuple[float, float] | None]]:
+    """Per row: mean (seconds, metric) per curve fraction (from ``curves``, :func:`curve_table`), and the
+    mean final (total s, metric) point."""
     out = {}
-    curves = curve_table(report)
     curves = curves[(curves["group"] == gid) & (curves["metric"] == key)].sort_values("fraction")
     ok = report.jobs[(report.jobs["status"] == "ok") & (report.jobs["gid"] == gid)]
     for label, sub in ok.groupby("row", sort=False):
@@ -594,19 +593,21 @@ def _curves(report: TableReport, gid: str, key: str) -> dict[str, tuple[list[flo
     return dict(sorted(out.items(), key=lambda kv: order.index(kv[0]) if kv[0] in order else len(order)))
 
 
-def plot_accuracy_vs_time(report: TableReport) -> bytes:
-    """PNG bytes: the main metric against wall seconds, one curve per row, one panel per group."""
+def plot_accuracy_vs_time(report: TableReport, curves: pd.DataFrame | None = None) -> bytes:
+    """PNG bytes: the main metric against wall seconds, one curve per row, one panel per group
+    (``curves``: :func:`curve_table` of ``report`` when the caller has it already)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
     _, main = report.spec.main_metric()
     groups = [g for g in report.spec.groups if g.column(main.key) is not None and not g.column(main.key).paper_only]  # type: ignore[union-attr]
+    curves = curve_table(report) if curves is None else curves
+    colours = {r.label: f"C{k % 10}" for k, r in enumerate(report.spec.rows)}  # one colour per row in every panel
     fig = Figure(figsize=(5.0 * len(groups), 3.8))
     FigureCanvasAgg(fig)
     for i, g in enumerate(groups):
         ax = fig.add_subplot(1, len(groups), i + 1)
-        colours = {r.label: f"C{k % 10}" for k, r in enumerate(report.spec.rows)}  # one colour per row in every panel
-        for label, (xs, ys, end) in _curves(report, g.id, main.key).items():
+        for label, (xs, ys, end) in _curves(report, curves, g.id, main.key).items():
             line = ax.plot(xs, ys, marker=".", label=label, color=colours.get(label))[0] if xs else None
             if end is not None:
                 ax.plot([end[0]], [end[1]], marker="o", linestyle="", color=colours.get(label),
@@ -634,10 +635,11 @@ def write_table_outputs(report: TableReport, out_dir: str | Path) -> dict[str, P
              "md": out / f"{name}.md", "png": out / f"{name}_accuracy_vs_time.png"}
     atomic_write_text(paths["csv"], report.tidy.to_csv(index=False))
     atomic_write_text(paths["time_csv"], report.timing.to_csv(index=False))
-    atomic_write_text(paths["curve_csv"], curve_table(report).to_csv(index=False))
+    curves = curve_table(report)
+    atomic_write_text(paths["curve_csv"], curves.to_csv(index=False))
     atomic_write_text(paths["md"], to_markdown(report, heading_level=1)
                       + f"\n![accuracy vs time]({paths['png'].name})\n")
-    atomic_write_bytes(paths["png"], plot_accuracy_vs_time(report))
+    atomic_write_bytes(paths["png"], plot_accuracy_vs_time(report, curves))
     return paths
 
 

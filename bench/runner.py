@@ -224,8 +224,9 @@ def run_jobs(
 
     Runs every job whose result is not stored yet (all of them with ``force``; see :func:`needs_run`)
     on ``executor`` (default: :class:`~bench.executors.local.LocalExecutor` with one worker, in this
-    process; jobs that train first, see :func:`training_first`), writes each row to ``<out_dir>/jobs/<job_id>.json`` the moment the executor reports it,
-    and shows progress (jobs done / running / failed). Jobs with the same id run once.
+    process; jobs that train first, see :func:`training_first`), writes each row to
+    ``<out_dir>/jobs/<job_id>.json`` the moment the executor reports it, and shows progress (jobs done /
+    running / failed). Jobs with the same id run once.
 
     Returns:
         The result rows of all jobs (stored or freshly computed), in job order.

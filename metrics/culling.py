@@ -259,7 +259,7 @@ def render_depth_maps(mesh: Any, K: Any, cam_to_world: Any, H: int, W: int) -> n
     return out
 
 
-def _touched_blocks(depth: np.ndarray, K: np.ndarray, c2w: np.ndarray, depth_trunc: float, trunc: float, block_size: float) -> np.ndarray:
+def _touched_block_keys(depth: np.ndarray, K: np.ndarray, c2w: np.ndarray, depth_trunc: float, trunc: float, block_size: float) -> np.ndarray:
     """Blocks a frame touches, as legacy ``ScalableTSDFVolume::Integrate``: every block that the cube of
     half-side ``trunc`` around a back-projected depth point (0 < z <= ``depth_trunc``) overlaps.
 
@@ -267,27 +267,35 @@ def _touched_blocks(depth: np.ndarray, K: np.ndarray, c2w: np.ndarray, depth_tru
         depth: (H, W) z-depth, metres. K: (3, 3). c2w: (4, 4). block_size: metres.
 
     Returns:
-        (M, 3) int32 unique block coordinates (block = floor(x / block_size)).
+        (M,) sorted unique int64 keys of the block coordinates floor(x / block_size) (:func:`_block_key`;
+        :func:`_block_coords` decodes them).
     """
     vv, uu = np.nonzero((depth > 0) & (depth <= depth_trunc))
     if vv.size == 0:
-        return np.zeros((0, 3), dtype=np.int32)
+        return np.zeros(0, dtype=np.int64)
     z = depth[vv, uu].astype(np.float64)
     pc = np.stack([uu, vv, np.ones_like(uu)], 1).astype(np.float64) @ np.linalg.inv(K).T * z[:, None]
     pw = pc @ c2w[:3, :3].T + c2w[:3, 3]
     lo = np.floor((pw - trunc) / block_size).astype(np.int64)
     hi = np.floor((pw + trunc) / block_size).astype(np.int64)
-    keys = np.unique(np.concatenate([_block_key(np.where(bx, hi[:, 0], lo[:, 0]), np.where(by, hi[:, 1], lo[:, 1]), np.where(bz, hi[:, 2], lo[:, 2]))
+    return np.unique(np.concatenate([_block_key(np.where(bx, hi[:, 0], lo[:, 0]), np.where(by, hi[:, 1], lo[:, 1]), np.where(bz, hi[:, 2], lo[:, 2]))
                                      for bx in (0, 1) for by in (0, 1) for bz in (0, 1)]))
-    off = 1 << 20
-    return np.stack([(keys >> 42) - off, ((keys >> 21) & (2 * off - 1)) - off, (keys & (2 * off - 1)) - off], 1).astype(np.int32)
+
+
+_BLOCK_OFFSET = 1 << 20  # block coordinates in [-2^20, 2^20) per axis, 21 bits each
 
 
 def _block_key(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
-    """One int64 per block coordinate triple (21 bits per axis, offset 2^20): 1-D ``np.unique`` is ~10x
-    faster than ``np.unique(axis=0)`` on rows."""
-    off = 1 << 20
+    """One int64 per block coordinate triple (21 bits per axis): 1-D ``np.unique`` is ~10x faster than
+    ``np.unique(axis=0)`` on rows."""
+    off = _BLOCK_OFFSET
     return ((x + off) << 42) | ((y + off) << 21) | (z + off)
+
+
+def _block_coords(keys: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`_block_key`: (M,) keys -> (M, 3) int32 block coordinates."""
+    off, mask = _BLOCK_OFFSET, (2 * _BLOCK_OFFSET) - 1
+    return np.stack([(keys >> 42) - off, ((keys >> 21) & mask) - off, (keys & mask) - off], 1).astype(np.int32)
 
 
 def tsdf_refuse(
@@ -346,16 +354,10 @@ def tsdf_refuse(
     if not np.any((depth > 0) & (depth <= dt)):
         return empty
     trunc_mult = tr / vs
-    frames = []
-    for i in range(c2w.shape[0]):
-        frames.append((o3d.t.geometry.Image(o3d.core.Tensor(np.ascontiguousarray(depth[i][..., None]))),
-                       o3d.core.Tensor(np.ascontiguousarray(Km[i], dtype=np.float64)),
-                       o3d.core.Tensor(np.ascontiguousarray(np.linalg.inv(c2w[i])), o3d.core.float64)))
-
     # pass 1: the blocks every frame touches (their union sizes the hash map exactly)
     block_size = vs * int(block_resolution)
-    per_frame = [_touched_blocks(depth[i], Km[i], c2w[i], dt, tr, block_size) for i in range(c2w.shape[0])]
-    n_blocks = len(np.unique(np.concatenate([_block_key(*c.T.astype(np.int64)) for c in per_frame])))
+    per_frame = [_touched_block_keys(depth[i], Km[i], c2w[i], dt, tr, block_size) for i in range(c2w.shape[0])]
+    n_blocks = len(np.unique(np.concatenate(per_frame)))
     if n_blocks > max_blocks:
         raise ValueError(f"TSDF fusion would allocate {n_blocks} blocks of {block_resolution}^3 voxels of {vs} m "
                          f"(> max_blocks={max_blocks}); pass a larger voxel_size or max_blocks")
@@ -363,9 +365,12 @@ def tsdf_refuse(
     grid = o3d.t.geometry.VoxelBlockGrid(
         attr_names=("tsdf", "weight"), attr_dtypes=(o3d.core.float32, o3d.core.float32), attr_channels=((1), (1)),
         voxel_size=vs, block_resolution=int(block_resolution), block_count=n_blocks + 64, device=o3d.core.Device("CPU:0"))
-    for (img, intr, extr), coords in zip(frames, per_frame):
-        if len(coords):
-            grid.integrate(o3d.core.Tensor(coords), img, intr, extr, 1.0, dt, trunc_mult)
+    for i, keys in enumerate(per_frame):
+        if len(keys):
+            grid.integrate(o3d.core.Tensor(_block_coords(keys)),
+                           o3d.t.geometry.Image(o3d.core.Tensor(np.ascontiguousarray(depth[i][..., None]))),
+                           o3d.core.Tensor(np.ascontiguousarray(Km[i], dtype=np.float64)),
+                           o3d.core.Tensor(np.ascontiguousarray(np.linalg.inv(c2w[i])), o3d.core.float64), 1.0, dt, trunc_mult)
     m = grid.extract_triangle_mesh(weight_threshold=0.5).to_legacy()  # seen once suffices (legacy: weight > 0; the t-API default is 3)
     if len(m.triangles) == 0:
         return empty

@@ -159,12 +159,10 @@ def render_rays(
     S = t.shape[1]
     pts = origins[:, None, :] + dirs[:, None, :] * t[..., None]
     flat = pts.reshape(-1, 3)
-    n_extra = 0 if extra_points is None else int(extra_points.shape[0])
     sdf, geo, grad = sdf_net(flat if extra_points is None else torch.cat([flat, extra_points]), with_gradient=True)
     assert grad is not None
-    extra_grad = grad[R * S:] if n_extra else None
-    if n_extra:
-        sdf, geo, grad = sdf[: R * S], geo[: R * S], grad[: R * S]
+    extra_grad = None if extra_points is None else grad[R * S:]
+    sdf, geo, grad = sdf[: R * S], geo[: R * S], grad[: R * S]  # the ray samples (views without extra points)
     normals = F.normalize(grad, dim=-1, eps=1e-8)
     view = dirs[:, None, :].expand(R, S, 3).reshape(-1, 3)
     rgb_s = color_net(flat, view, normals, geo).reshape(R, S, 3)

@@ -9,7 +9,8 @@ from metrics.culling import (
     gt_bounding_box,
     points_in_frusta,
     render_depth_maps,
-    _touched_blocks,
+    _block_coords,
+    _touched_block_keys,
     tsdf_refuse,
 )
 from metrics.dtu import DTUParams, dtu_chamfer, dtu_gt_points, radius_downsample, sample_mesh_dtu
@@ -104,7 +105,7 @@ def test_touched_blocks_match_a_per_point_loop():
     K = np.array([[5.0, 0, 3.5], [0, 5.0, 2.5], [0, 0, 1]])
     c2w = np.eye(4)
     c2w[:3, 3] = [-1.3, 0.2, 0.7]
-    got = {tuple(b) for b in _touched_blocks(depth, K, c2w, 5.0, 0.06, 0.32).tolist()}
+    got = {tuple(b) for b in _block_coords(_touched_block_keys(depth, K, c2w, 5.0, 0.06, 0.32)).tolist()}
     want = set()
     for v, u in zip(*np.nonzero((depth > 0) & (depth <= 5.0))):
         p = np.linalg.inv(K) @ np.array([u, v, 1.0]) * depth[v, u] + c2w[:3, 3]
