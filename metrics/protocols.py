@@ -52,6 +52,21 @@ def _nonempty(mesh: Any, what: str) -> Any:
     return mesh
 
 
+def nothing_visible_metrics(threshold: float, n_gt: int) -> MeshMetrics:
+    """The metrics of a prediction of which nothing is left where the cameras look (after culling,
+    cropping or re-fusion): no predicted point, so no GT point is within ``threshold`` of one
+    (recall 0) and precision is 0 by convention (as ``zero_division=0``), F-score 0. The distances
+    (accuracy, completion, Chamfer) and normal consistency are undefined: NaN, left out of the tables'
+    means (shown as "not reported"). ``n_pred`` is 0.
+
+    Example: a no-prior SDF that never carves the room keeps its initial sphere, which lies behind
+    every wall. MonoSDF's own evaluation would crash on the empty mesh; a benchmark counts it as F = 0.
+    """
+    nan = float("nan")
+    return MeshMetrics(accuracy=nan, completion=nan, chamfer=nan, precision=0.0, recall=0.0, fscore=0.0,
+                       normal_consistency=nan, threshold=float(threshold), n_pred=0, n_gt=int(n_gt))
+
+
 @dataclass(frozen=True)
 class ReplicaGTSurface:
     """The seed-independent GT side of the Replica protocol (steps 1-3): the GT depth maps used to cull
@@ -154,7 +169,8 @@ def evaluate_mesh_replica(
         :class:`MeshMetrics` with normal consistency.
 
     Raises:
-        ValueError: empty / degenerate mesh, or a mesh with nothing left after culling.
+        ValueError: empty / degenerate input mesh, or a GT with nothing left after culling. A pred with
+        nothing left after culling or cropping is a result, not an error: :func:`nothing_visible_metrics`.
     """
     Km, c2w, h, w = as_cameras(K, cam_to_world, H, W)
     clean_mesh(pred_mesh, "pred_mesh")
@@ -169,10 +185,10 @@ def evaluate_mesh_replica(
         pred = cull_mesh_to_visible(pred, Km, c2w, h, w, depth_maps=prepared_gt.depth_maps, tol=occlusion_tol)
     else:
         pred = cull_mesh_to_frusta(pred, Km, c2w, h, w)
-    _nonempty(pred, "pred_mesh")
-    pred = crop_mesh_to_bbox(pred, prepared_gt.to_box, prepared_gt.half)
-    if len(pred.faces) == 0:
-        raise ValueError("pred_mesh is empty after cropping to the GT bounding box x%.2f" % bbox_scale)
+    if len(pred.faces):
+        pred = crop_mesh_to_bbox(pred, prepared_gt.to_box, prepared_gt.half)
+    if len(pred.faces) == 0:  # nothing of pred where the cameras look (or inside the GT box x bbox_scale)
+        return nothing_visible_metrics(threshold, prepared_gt.points.shape[0])
     pp, pn = sample_mesh_surface(pred, n_samples, seed=seed)
     return point_metrics(pp, prepared_gt.points, threshold, pn, prepared_gt.normals, backend=backend)
 
@@ -213,15 +229,17 @@ def evaluate_mesh_scannet(
     v_gt, f_gt = clean_mesh(gt_mesh, "gt_mesh")
     check_positive(threshold, "threshold")
     kw = dict(voxel_size=tsdf_voxel, sdf_trunc=tsdf_trunc, depth_trunc=depth_trunc)
-    pred = _nonempty(tsdf_refuse(pred_mesh, Km, c2w, h, w, **kw), "pred_mesh (TSDF re-fused)")
     if refuse_gt:
         gt = _nonempty(tsdf_refuse(gt_mesh, Km, c2w, h, w, **kw), "gt_mesh (TSDF re-fused)")
         v_gt = np.asarray(gt.vertices, dtype=np.float64)
     else:
         v_gt = v_gt[np.unique(f_gt)]
-    pv = voxel_downsample(np.asarray(pred.vertices, dtype=np.float64), downsample_voxel)
     gv = voxel_downsample(v_gt, downsample_voxel)
+    pred = tsdf_refuse(pred_mesh, Km, c2w, h, w, **kw)
+    if len(pred.vertices) == 0:  # no camera sees any of pred
+        return nothing_visible_metrics(threshold, gv.shape[0])
+    pv = voxel_downsample(np.asarray(pred.vertices, dtype=np.float64), downsample_voxel)
     return point_metrics(pv, gv, threshold, backend=backend)
 
 
-__all__ = ["evaluate_mesh_replica", "evaluate_mesh_scannet", "render_depth_maps"]
+__all__ = ["evaluate_mesh_replica", "evaluate_mesh_scannet", "nothing_visible_metrics", "render_depth_maps"]

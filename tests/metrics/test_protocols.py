@@ -66,8 +66,10 @@ def test_replica_protocol_identical_and_shifted(ring_cameras):
     assert m.accuracy == pytest.approx(0.03, abs=3e-3) and m.completion == pytest.approx(0.03, abs=4e-3)
     far = trimesh.creation.icosphere(2, radius=0.5)
     far.apply_translation([0, 0, 40.0])
-    with pytest.raises(ValueError, match="empty after culling"):
-        evaluate_mesh_replica(far, gt, K, c2w, H, W, n_samples=1000)
+    nothing = evaluate_mesh_replica(far, gt, K, c2w, H, W, n_samples=1000)  # no camera sees it: a result, F = 0
+    assert (nothing.precision, nothing.recall, nothing.fscore, nothing.n_pred) == (0.0, 0.0, 0.0, 0)
+    assert np.isnan(nothing.accuracy) and np.isnan(nothing.completion) and np.isnan(nothing.normal_consistency)
+    assert nothing.n_gt == 1000
 
 
 def test_replica_prepared_gt_gives_identical_metrics(ring_cameras):
@@ -126,6 +128,11 @@ def test_scannet_protocol(ring_cameras):
     moved.apply_translation([0.1, 0, 0])
     m = evaluate_mesh_scannet(moved, gt, K, c2w, H, W, **kw)
     assert 0.03 < m.chamfer < 0.1 and m.fscore < 1.0
+    far = gt.copy()
+    far.apply_translation([0, 0, 40.0])
+    nothing = evaluate_mesh_scannet(far, gt, K, c2w, H, W, **kw)  # re-fuses to nothing: F = 0, distances undefined
+    assert (nothing.fscore, nothing.recall, nothing.n_pred) == (0.0, 0.0, 0) and np.isnan(nothing.chamfer)
+    assert nothing.n_gt == same.n_gt
 
 
 def test_dtu_sampling_downsampling_and_chamfer(ring_cameras):
