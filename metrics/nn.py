@@ -7,6 +7,13 @@ directions + N.C.): scipy's ``cKDTree`` is a little faster when the prediction l
 unconverged or prior-free SDF produces and what dominates a table's evaluation time. ``backend="scipy"``
 stays available (matches the brute-force twin to 1e-12, as does open3d); ``backend="brute"`` is the
 obviously-correct reference used by the tests (O(N M) in chunks, only for small clouds).
+
+Both KD-tree backends see the points in Z-order (:func:`morton_order`: queries and reference sorted
+along a Morton curve, the results mapped back to the caller's order). A mesh's surface samples come in
+face order and its vertices in marching-cubes order, so consecutive queries jump across the scene and
+every query walks the tree from a cold cache; in Z-order consecutive queries visit the same nodes.
+Exact (same distances; the index of the nearest point can differ only between equidistant points) and
+measured 1.5-3x faster per direction at one thread on the dense table's meshes (README).
 """
 
 from __future__ import annotations
@@ -19,6 +26,29 @@ import numpy as np
 from metrics._checks import as_points, check_int
 
 Backend = Literal["scipy", "open3d", "brute"]
+MORTON_BITS = 10  # per axis: 1024^3 cells over the cloud's bounding cube
+
+
+def _spread_bits(x: np.ndarray) -> np.ndarray:
+    """Interleave two zero bits after each of the low 10 bits of ``x`` (uint64): b9..b0 -> b9 0 0 ... b0."""
+    x = x & np.uint64(0x3FF)
+    x = (x | (x << np.uint64(16))) & np.uint64(0x30000FF)
+    x = (x | (x << np.uint64(8))) & np.uint64(0x300F00F)
+    x = (x | (x << np.uint64(4))) & np.uint64(0x30C30C3)
+    x = (x | (x << np.uint64(2))) & np.uint64(0x9249249)
+    return x
+
+
+def morton_order(points: np.ndarray) -> np.ndarray:
+    """Permutation that sorts (N, 3) points along a Z-order (Morton) curve over their bounding cube
+    (``MORTON_BITS`` bits per axis; stable, so equal codes keep their order). (N,) int64."""
+    p = np.asarray(points, dtype=np.float64)
+    lo = p.min(axis=0)
+    span = float((p.max(axis=0) - lo).max())
+    scale = (2**MORTON_BITS - 1) / span if span > 0 else 0.0
+    c = ((p - lo) * scale).astype(np.uint64)
+    code = _spread_bits(c[:, 0]) | (_spread_bits(c[:, 1]) << np.uint64(1)) | (_spread_bits(c[:, 2]) << np.uint64(2))
+    return np.argsort(code, kind="stable")
 
 
 def nearest_neighbor_bruteforce(
@@ -75,6 +105,21 @@ def nearest_neighbor(
     """
     q = as_points(query, "query")
     r = as_points(reference, "reference")
+    if backend in ("scipy", "open3d"):
+        qo, ro = morton_order(q), morton_order(r)  # Z-order (module docstring), mapped back below
+        d_sorted, i_sorted = _kdtree_nearest(np.ascontiguousarray(q[qo]), np.ascontiguousarray(r[ro]), backend, workers)
+        dist = np.empty_like(d_sorted)
+        idx = np.empty_like(i_sorted)
+        dist[qo] = d_sorted
+        idx[qo] = ro[i_sorted]
+        return dist, idx
+    if backend == "brute":
+        return nearest_neighbor_bruteforce(q, r)
+    raise ValueError(f"backend must be 'scipy', 'open3d' or 'brute', got {backend!r}")
+
+
+def _kdtree_nearest(q: np.ndarray, r: np.ndarray, backend: str, workers: int | None) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest reference point of every query with a KD-tree backend (inputs in any order)."""
     if backend == "scipy":
         from scipy.spatial import cKDTree
 
@@ -83,13 +128,9 @@ def nearest_neighbor(
         tree = cKDTree(r, balanced_tree=False, compact_nodes=False)
         d, i = tree.query(q, k=1, workers=workers)
         return np.asarray(d, dtype=np.float64), np.asarray(i, dtype=np.int64)
-    if backend == "open3d":
-        import open3d as o3d
+    import open3d as o3d
 
-        nns = o3d.core.nns.NearestNeighborSearch(o3d.core.Tensor(r))
-        nns.knn_index()
-        i, d2 = nns.knn_search(o3d.core.Tensor(q), 1)
-        return np.sqrt(d2.numpy()[:, 0]).astype(np.float64), i.numpy()[:, 0].astype(np.int64)
-    if backend == "brute":
-        return nearest_neighbor_bruteforce(q, r)
-    raise ValueError(f"backend must be 'scipy', 'open3d' or 'brute', got {backend!r}")
+    nns = o3d.core.nns.NearestNeighborSearch(o3d.core.Tensor(r))
+    nns.knn_index()
+    i, d2 = nns.knn_search(o3d.core.Tensor(q), 1)
+    return np.sqrt(d2.numpy()[:, 0]).astype(np.float64), i.numpy()[:, 0].astype(np.int64)
