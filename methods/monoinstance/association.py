@@ -221,7 +221,10 @@ def associate_instances(
         rad = float(cfg["assoc_overlap_radius_m"])
         # directed nearest distances d(a -> B) for every candidate pair, batched per target node B:
         # one KD-tree and one query call per node instead of two per pair
-        directed: dict[tuple[int, int], np.ndarray] = {}
+        # (per directed pair only two numbers are needed: the mean distance and the overlap fraction,
+        # reduced per partner segment with np.add.reduceat instead of one array per pair)
+        mean_d: dict[tuple[int, int], float] = {}
+        overlap: dict[tuple[int, int], float] = {}
         partners: dict[int, list[int]] = {}
         for a, b in zip(ia.tolist(), ib.tolist()):
             partners.setdefault(b, []).append(a)
@@ -229,16 +232,17 @@ def associate_instances(
         for b in sorted(partners):
             qs = partners[b]
             d = cKDTree(targets[b]).query(np.concatenate([clouds[a] for a in qs]), k=1)[0]
-            splits = np.cumsum([clouds[a].shape[0] for a in qs])[:-1]
-            for a, da in zip(qs, np.split(d, splits)):
-                directed[(a, b)] = da
+            sizes = np.array([clouds[a].shape[0] for a in qs])
+            starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+            means = np.add.reduceat(d, starts) / sizes
+            fracs = np.add.reduceat((d <= rad).astype(np.float64), starts) / sizes
+            for a, m, o in zip(qs, means.tolist(), fracs.tolist()):
+                mean_d[(a, b)] = m
+                overlap[(a, b)] = o
         for a, b in zip(ia.tolist(), ib.tolist()):
-            dab, dba = directed[(a, b)], directed[(b, a)]
-            if cfg["assoc_chamfer_mode"] == "symmetric":
-                cd = 0.5 * (dab.mean() + dba.mean())
-            else:
-                cd = min(dab.mean(), dba.mean())
-            oab, oba = float(np.mean(dab <= rad)), float(np.mean(dba <= rad))
+            mab, mba = mean_d[(a, b)], mean_d[(b, a)]
+            cd = 0.5 * (mab + mba) if cfg["assoc_chamfer_mode"] == "symmetric" else min(mab, mba)
+            oab, oba = overlap[(a, b)], overlap[(b, a)]
             if cd < thr_pair[a, b] and max(oab, oba) >= cfg["assoc_overlap_min"]:
                 edges.append((a, b, 0.5 * (oab + oba)))
 
