@@ -66,11 +66,12 @@ def _cached_gt(protocol: str, scene: Scene, params: dict[str, Any], extra: tuple
 
 
 def _refused_gt(scene: Scene, views: np.ndarray, params: dict[str, Any]) -> Any:
-    from metrics.culling import tsdf_refuse
+    from metrics.culling import MONOSDF_BLOCK_M, block_resolution_for, tsdf_refuse
 
     return _cached_gt("scannet", scene, params, tuple(int(v) for v in views), lambda: tsdf_refuse(
         scene.load_gt_mesh(), scene.intrinsics[views], scene.cam_to_world[views], scene.height, scene.width,
-        voxel_size=params["tsdf_voxel"], sdf_trunc=params["tsdf_trunc"], depth_trunc=params["depth_trunc"]))
+        voxel_size=params["tsdf_voxel"], sdf_trunc=params["tsdf_trunc"], depth_trunc=params["depth_trunc"],
+        block_resolution=block_resolution_for(params["tsdf_voxel"], params.get("tsdf_block", MONOSDF_BLOCK_M))))
 
 
 def _replica_gt(scene: Scene, views: np.ndarray, params: dict[str, Any], seed: int) -> Any:

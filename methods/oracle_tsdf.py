@@ -16,12 +16,13 @@ from bench.errors import BenchInputError
 from bench.scene import Scene
 from methods.base import Artifacts, ProgressFn, Snapshot
 from methods.registry import register
-from metrics.culling import tsdf_refuse
+from metrics.culling import MONOSDF_BLOCK_M, block_resolution_for, tsdf_refuse
 
 
 @register("oracle_tsdf")
 class OracleTSDF:
-    """TSDF fusion of GT depth (upper bound). Config: ``voxel_size`` (m), ``trunc_voxels``, ``fractions``."""
+    """TSDF fusion of GT depth (upper bound). Config: ``voxel_size`` (m), ``trunc_voxels``, ``depth_trunc`` (m), ``block_m`` (fusion block width,
+    m: MonoSDF's 16 cm), ``fractions``."""
 
     name = "oracle_tsdf"
 
@@ -38,7 +39,8 @@ class OracleTSDF:
             sel = views[:k]
             t = time.perf_counter()
             mesh = tsdf_refuse(None, scene.intrinsics[sel], scene.cam_to_world[sel], scene.height, scene.width, voxel_size=voxel,
-                               sdf_trunc=float(config["trunc_voxels"]) * voxel, depth_trunc=float(config["depth_trunc"]), depth_maps=scene.gt_depth[sel])
+                               sdf_trunc=float(config["trunc_voxels"]) * voxel, depth_trunc=float(config["depth_trunc"]), depth_maps=scene.gt_depth[sel],
+                               block_resolution=block_resolution_for(voxel, float(config.get("block_m", MONOSDF_BLOCK_M))))
             fuse_seconds = time.perf_counter() - t
             snapshots.append(Snapshot(fraction=float(frac), iterations=int(k), seconds=fuse_seconds, mesh=mesh))
             if progress:

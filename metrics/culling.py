@@ -298,6 +298,19 @@ def _block_coords(keys: np.ndarray) -> np.ndarray:
     return np.stack([(keys >> 42) - off, ((keys >> 21) & mask) - off, (keys & mask) - off], 1).astype(np.int32)
 
 
+MONOSDF_BLOCK_M = 0.16  # ScalableTSDFVolume's volume unit in MonoSDF's ScanNet evaluation: 16 voxels of 1 cm
+
+
+def block_resolution_for(voxel_size: float, block_m: float = MONOSDF_BLOCK_M) -> int:
+    """Voxels per block side that keep a block ``block_m`` metres wide at ``voxel_size`` (at least 1).
+
+    The block scheme decides which frames update which voxels (each frame integrates into the blocks
+    its depth touches), so it is a length, not a voxel count: MonoSDF's 16-voxel units of 1 cm are
+    16 cm wide; at our small scale's 2 cm voxels the same 16 cm is 8 voxels.
+    """
+    return max(1, int(round(check_positive(block_m, "block_m") / check_positive(voxel_size, "voxel_size"))))
+
+
 def tsdf_refuse(
     mesh: Any,
     K: Any,

@@ -33,6 +33,8 @@ import numpy as np
 
 from metrics._checks import as_cameras, check_int, check_positive
 from metrics.culling import (
+    MONOSDF_BLOCK_M,
+    block_resolution_for,
     crop_mesh_to_bbox,
     cull_mesh_to_frusta,
     cull_mesh_to_visible,
@@ -205,6 +207,7 @@ def evaluate_mesh_scannet(
     tsdf_voxel: float = 0.01,
     tsdf_trunc: float = 0.03,
     depth_trunc: float = 5.0,
+    tsdf_block: float = MONOSDF_BLOCK_M,
     refuse_gt: bool = True,
     backend: Backend = "open3d",
 ) -> MeshMetrics:
@@ -217,6 +220,8 @@ def evaluate_mesh_scannet(
         threshold: precision / recall / F threshold, metres (0.05).
         downsample_voxel: voxel of the vertex downsampling, metres (0.02).
         tsdf_voxel, tsdf_trunc, depth_trunc: re-fusion parameters, metres (0.01, 0.03, 5.0).
+        tsdf_block: width of the fusion's blocks, metres (MonoSDF: 16 voxels of 1 cm = 0.16); the voxels
+            per block side are :func:`metrics.culling.block_resolution_for` ``(tsdf_voxel, tsdf_block)``.
         refuse_gt: also re-fuse the GT (restricts a complete synthetic GT to the observed surface).
         backend: nearest-neighbour backend.
 
@@ -228,7 +233,8 @@ def evaluate_mesh_scannet(
     clean_mesh(pred_mesh, "pred_mesh")
     v_gt, f_gt = clean_mesh(gt_mesh, "gt_mesh")
     check_positive(threshold, "threshold")
-    kw = dict(voxel_size=tsdf_voxel, sdf_trunc=tsdf_trunc, depth_trunc=depth_trunc)
+    kw = dict(voxel_size=tsdf_voxel, sdf_trunc=tsdf_trunc, depth_trunc=depth_trunc,
+              block_resolution=block_resolution_for(tsdf_voxel, tsdf_block))
     if refuse_gt:
         gt = _nonempty(tsdf_refuse(gt_mesh, Km, c2w, h, w, **kw), "gt_mesh (TSDF re-fused)")
         v_gt = np.asarray(gt.vertices, dtype=np.float64)

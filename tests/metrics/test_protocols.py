@@ -12,6 +12,7 @@ from metrics.culling import (
     _block_coords,
     _touched_block_keys,
     tsdf_refuse,
+    voxel_downsample,
 )
 from metrics.dtu import DTUParams, dtu_chamfer, dtu_gt_points, radius_downsample, sample_mesh_dtu
 from metrics.protocols import cull_replica_gt, evaluate_mesh_replica, evaluate_mesh_scannet, sample_replica_gt
@@ -175,3 +176,19 @@ def test_world_to_cam_matches_its_per_camera_twin(ring_cameras):
     pts = np.random.default_rng(0).normal(size=(1000, 3))
     np.testing.assert_allclose(_world_to_cam(pts, np.asarray(c2w, dtype=np.float64)),
                                _world_to_cam_reference(pts, np.asarray(c2w, dtype=np.float64)), atol=1e-12)
+
+
+def test_fusion_blocks_keep_monosdf_width_in_metres(ring_cameras):
+    """MonoSDF's 16-voxel units of 1 cm are 16 cm wide: 16 voxels at 1 cm, 8 at 2 cm; the ScanNet
+    protocol's re-fusion uses that block (same mesh as tsdf_refuse called with it)."""
+    from metrics.culling import block_resolution_for
+
+    assert [block_resolution_for(v) for v in (0.01, 0.02, 0.015, 0.5)] == [16, 8, 11, 1]
+    K, c2w, H, W = ring_cameras
+    gt = trimesh.creation.box((0.8, 0.8, 0.8))
+    moved = gt.copy()
+    moved.apply_translation([0.02, 0, 0])
+    kw = dict(voxel_size=0.02, sdf_trunc=0.06)
+    m = evaluate_mesh_scannet(moved, gt, K, c2w, H, W, tsdf_voxel=0.02, tsdf_trunc=0.06)
+    pv = voxel_downsample(np.asarray(tsdf_refuse(moved, K, c2w, H, W, block_resolution=8, **kw).vertices), 0.02)
+    assert m.n_pred == pv.shape[0]
