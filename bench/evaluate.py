@@ -65,13 +65,16 @@ def _cached_gt(protocol: str, scene: Scene, params: dict[str, Any], extra: tuple
     return value
 
 
-def _refused_gt(scene: Scene, views: np.ndarray, params: dict[str, Any]) -> Any:
-    from metrics.culling import MONOSDF_BLOCK_M, block_resolution_for, tsdf_refuse
+def _scannet_gt(scene: Scene, views: np.ndarray, params: dict[str, Any]) -> Any:
+    """The ScanNet GT side once per scene: the re-fused GT's downsampled vertices and their
+    nearest-neighbour index (:class:`metrics.nn.NearestNeighborIndex`)."""
+    from metrics.nn import NearestNeighborIndex
+    from metrics.protocols import scannet_gt_points
 
-    return _cached_gt("scannet", scene, params, tuple(int(v) for v in views), lambda: tsdf_refuse(
-        scene.load_gt_mesh(), scene.intrinsics[views], scene.cam_to_world[views], scene.height, scene.width,
-        voxel_size=params["tsdf_voxel"], sdf_trunc=params["tsdf_trunc"], depth_trunc=params["depth_trunc"],
-        block_resolution=block_resolution_for(params["tsdf_voxel"], params.get("tsdf_block", MONOSDF_BLOCK_M))))
+    cams = (scene.intrinsics[views], scene.cam_to_world[views], scene.height, scene.width)
+    keys = ("downsample_voxel", "tsdf_voxel", "tsdf_trunc", "depth_trunc", "tsdf_block")
+    return _cached_gt("scannet", scene, params, tuple(int(v) for v in views), lambda: NearestNeighborIndex(
+        scannet_gt_points(scene.load_gt_mesh(), *cams, **{k: params[k] for k in keys if k in params})))
 
 
 def _replica_gt(scene: Scene, views: np.ndarray, params: dict[str, Any], seed: int) -> Any:
@@ -158,8 +161,8 @@ def evaluate_snapshot(snapshot: Snapshot, scene: Scene, protocol: str, scale: st
         views = scene.view_indices("train")
         cams = (scene.intrinsics[views], scene.cam_to_world[views], scene.height, scene.width)
         if protocol == "scannet":
-            gt = _refused_gt(scene, views, params)
-            return _mesh_metrics(evaluate_mesh_scannet(snapshot.mesh, gt, *cams, refuse_gt=False, **params))
+            gt_index = _scannet_gt(scene, views, params)
+            return _mesh_metrics(evaluate_mesh_scannet(snapshot.mesh, None, *cams, gt_index=gt_index, **params))
         prepared = _replica_gt(scene, views, params, seed)
         return _mesh_metrics(evaluate_mesh_replica(snapshot.mesh, None, *cams, seed=seed, prepared_gt=prepared, **params))
     if protocol == "dtu":

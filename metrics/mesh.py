@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from metrics._checks import as_points, check_int, check_positive
-from metrics.nn import Backend, nearest_neighbor
+from metrics.nn import Backend, NearestNeighborIndex, nearest_neighbor
 
 
 @dataclass(frozen=True)
@@ -78,6 +78,7 @@ def point_metrics(
     pred_normals: Any | None = None,
     gt_normals: Any | None = None,
     backend: Backend = "open3d",
+    gt_index: NearestNeighborIndex | None = None,
 ) -> MeshMetrics:
     """Accuracy, completion, Chamfer-L1, precision, recall, F-score and normal consistency.
 
@@ -91,6 +92,8 @@ def point_metrics(
         pred_normals: optional (M, 3) normals of ``pred_points`` (normalised here; sign ignored).
         gt_normals: optional (N, 3) normals of ``gt_points``. Both or neither must be given.
         backend: nearest-neighbour backend, see :func:`metrics.nn.nearest_neighbor`.
+        gt_index: optional :class:`metrics.nn.NearestNeighborIndex` of ``gt_points`` built once (a GT
+            evaluated against many predictions); same results as without (KD-tree backends only).
 
     Returns:
         :class:`MeshMetrics` (``normal_consistency`` NaN without normals).
@@ -112,8 +115,14 @@ def point_metrics(
         if gn.shape != g.shape:
             raise ValueError(f"gt_normals shape {gn.shape} must match gt_points shape {g.shape}")
 
-    d_p2g, i_p2g = nearest_neighbor(p, g, backend=backend)  # [M], for accuracy / precision
-    d_g2p, i_g2p = nearest_neighbor(g, p, backend=backend)  # [N], for completion / recall
+    if gt_index is not None and backend != "brute":
+        if len(gt_index) != g.shape[0]:
+            raise ValueError(f"gt_index holds {len(gt_index)} points, gt_points {g.shape[0]}")
+        d_p2g, i_p2g = gt_index.query(p)  # [M], for accuracy / precision
+        d_g2p, i_g2p = NearestNeighborIndex(p, gt_index.backend).query_from(gt_index)  # [N], completion / recall
+    else:
+        d_p2g, i_p2g = nearest_neighbor(p, g, backend=backend)
+        d_g2p, i_g2p = nearest_neighbor(g, p, backend=backend)
     acc = float(d_p2g.mean())
     comp = float(d_g2p.mean())
     prec = float((d_p2g < tau).mean())

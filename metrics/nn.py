@@ -106,31 +106,77 @@ def nearest_neighbor(
     q = as_points(query, "query")
     r = as_points(reference, "reference")
     if backend in ("scipy", "open3d"):
-        qo, ro = morton_order(q), morton_order(r)  # Z-order (module docstring), mapped back below
-        d_sorted, i_sorted = _kdtree_nearest(np.ascontiguousarray(q[qo]), np.ascontiguousarray(r[ro]), backend, workers)
-        dist = np.empty_like(d_sorted)
-        idx = np.empty_like(i_sorted)
-        dist[qo] = d_sorted
-        idx[qo] = ro[i_sorted]
-        return dist, idx
+        return NearestNeighborIndex(r, backend, workers).query(q)
     if backend == "brute":
         return nearest_neighbor_bruteforce(q, r)
     raise ValueError(f"backend must be 'scipy', 'open3d' or 'brute', got {backend!r}")
 
 
-def _kdtree_nearest(q: np.ndarray, r: np.ndarray, backend: str, workers: int | None) -> tuple[np.ndarray, np.ndarray]:
-    """Nearest reference point of every query with a KD-tree backend (inputs in any order)."""
-    if backend == "scipy":
-        from scipy.spatial import cKDTree
+class NearestNeighborIndex:
+    """A reference cloud prepared once for many nearest-neighbour queries (a GT cloud evaluated against
+    every snapshot of a job): its Z-order and its KD-tree. ``query`` is :func:`nearest_neighbor`.
 
-        if workers is None:
-            workers = int(os.environ.get("OMP_NUM_THREADS", "-1") or -1)
-        tree = cKDTree(r, balanced_tree=False, compact_nodes=False)
-        d, i = tree.query(q, k=1, workers=workers)
-        return np.asarray(d, dtype=np.float64), np.asarray(i, dtype=np.int64)
-    import open3d as o3d
+    Args:
+        reference: (N, 3) points, finite, N >= 1. backend: ``"open3d"`` or ``"scipy"``.
+        workers: scipy query threads (see :func:`nearest_neighbor`).
 
-    nns = o3d.core.nns.NearestNeighborSearch(o3d.core.Tensor(r))
-    nns.knn_index()
-    i, d2 = nns.knn_search(o3d.core.Tensor(q), 1)
-    return np.sqrt(d2.numpy()[:, 0]).astype(np.float64), i.numpy()[:, 0].astype(np.int64)
+    Attributes:
+        points: (N, 3) float64 reference as given; order: (N,) int64 its Z-order; sorted_points:
+        (N, 3) float64 ``points[order]``.
+    """
+
+    def __init__(self, reference: Any, backend: Backend = "open3d", workers: int | None = None) -> None:
+        if backend not in ("scipy", "open3d"):
+            raise ValueError(f"NearestNeighborIndex backend must be 'scipy' or 'open3d', got {backend!r}")
+        r = as_points(reference, "reference")
+        self.backend = backend
+        self.workers = workers
+        self.points = r
+        self.order = morton_order(r)
+        self.sorted_points = np.ascontiguousarray(r[self.order])
+        if backend == "scipy":
+            from scipy.spatial import cKDTree
+
+            self._tree = cKDTree(self.sorted_points, balanced_tree=False, compact_nodes=False)
+        else:
+            import open3d as o3d
+
+            self._tree = o3d.core.nns.NearestNeighborSearch(o3d.core.Tensor(self.sorted_points))
+            self._tree.knn_index()
+
+    def __len__(self) -> int:
+        return int(self.order.shape[0])
+
+    def query_sorted(self, q_sorted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Nearest reference point of each row of ``q_sorted`` (M, 3) float64, best in Z-order: distances
+        (M,) float64 and indices (M,) int64 into the ORIGINAL reference, in the order of ``q_sorted``."""
+        if self.backend == "scipy":
+            workers = self.workers if self.workers is not None else int(os.environ.get("OMP_NUM_THREADS", "-1") or -1)
+            d, i = self._tree.query(q_sorted, k=1, workers=workers)
+            d, i = np.asarray(d, dtype=np.float64), np.asarray(i, dtype=np.int64)
+        else:
+            import open3d as o3d
+
+            i, d2 = self._tree.knn_search(o3d.core.Tensor(np.ascontiguousarray(q_sorted, dtype=np.float64)), 1)
+            d, i = np.sqrt(d2.numpy()[:, 0]).astype(np.float64), i.numpy()[:, 0].astype(np.int64)
+        return d, self.order[i]
+
+    def query(self, query: Any) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`nearest_neighbor` of ``query`` (M, 3) against this reference: (M,) distances, (M,) indices."""
+        q = as_points(query, "query")
+        qo = morton_order(q)
+        d_sorted, i_sorted = self.query_sorted(np.ascontiguousarray(q[qo]))
+        return _unsort(qo, d_sorted, i_sorted)
+
+    def query_from(self, other: "NearestNeighborIndex") -> tuple[np.ndarray, np.ndarray]:
+        """Nearest neighbours of ``other``'s points (their Z-order is reused), in ``other``'s original order."""
+        d_sorted, i_sorted = self.query_sorted(other.sorted_points)
+        return _unsort(other.order, d_sorted, i_sorted)
+
+
+def _unsort(order: np.ndarray, d_sorted: np.ndarray, i_sorted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    dist = np.empty_like(d_sorted)
+    idx = np.empty_like(i_sorted)
+    dist[order] = d_sorted
+    idx[order] = i_sorted
+    return dist, idx

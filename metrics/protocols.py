@@ -45,7 +45,7 @@ from metrics.culling import (
     voxel_downsample,
 )
 from metrics.mesh import MeshMetrics, clean_mesh, point_metrics, sample_mesh_surface
-from metrics.nn import Backend
+from metrics.nn import Backend, NearestNeighborIndex
 
 
 def _nonempty(mesh: Any, what: str) -> Any:
@@ -84,13 +84,15 @@ class ReplicaGTSurface:
 @dataclass(frozen=True)
 class ReplicaGT:
     """The GT side of the Replica protocol for one sampling seed: the :class:`ReplicaGTSurface` fields
-    plus its surface samples / normals (``points``, ``normals``: (n_samples, 3))."""
+    plus its surface samples / normals (``points``, ``normals``: (n_samples, 3)) and their
+    nearest-neighbour ``index`` (reused by every snapshot evaluated against this GT)."""
 
     depth_maps: np.ndarray | None
     to_box: np.ndarray
     half: np.ndarray
     points: np.ndarray
     normals: np.ndarray
+    index: NearestNeighborIndex | None = None  # nearest-neighbour index of ``points`` (built once per seed)
 
 
 def cull_replica_gt(
@@ -128,7 +130,7 @@ def sample_replica_gt(surface: ReplicaGTSurface, n_samples: int = 200_000, seed:
     (independent of pred's samples, as MonoSDF)."""
     check_int(n_samples, "n_samples")
     gp, gn = sample_mesh_surface(surface.mesh, n_samples, seed=seed + 1)
-    return ReplicaGT(surface.depth_maps, surface.to_box, surface.half, gp, gn)
+    return ReplicaGT(surface.depth_maps, surface.to_box, surface.half, gp, gn, NearestNeighborIndex(gp))
 
 
 def evaluate_mesh_replica(
@@ -192,7 +194,8 @@ def evaluate_mesh_replica(
     if len(pred.faces) == 0:  # nothing of pred where the cameras look (or inside the GT box x bbox_scale)
         return nothing_visible_metrics(threshold, prepared_gt.points.shape[0])
     pp, pn = sample_mesh_surface(pred, n_samples, seed=seed)
-    return point_metrics(pp, prepared_gt.points, threshold, pn, prepared_gt.normals, backend=backend)
+    index = prepared_gt.index if backend == "open3d" else None
+    return point_metrics(pp, prepared_gt.points, threshold, pn, prepared_gt.normals, backend=backend, gt_index=index)
 
 
 def evaluate_mesh_scannet(
@@ -210,6 +213,7 @@ def evaluate_mesh_scannet(
     tsdf_block: float = MONOSDF_BLOCK_M,
     refuse_gt: bool = True,
     backend: Backend = "open3d",
+    gt_index: NearestNeighborIndex | None = None,
 ) -> MeshMetrics:
     """ScanNet protocol (MonoSDF ``scannet_eval``): TSDF re-fusion, 2 cm voxel downsampling, metrics.
 
@@ -224,6 +228,8 @@ def evaluate_mesh_scannet(
             per block side are :func:`metrics.culling.block_resolution_for` ``(tsdf_voxel, tsdf_block)``.
         refuse_gt: also re-fuse the GT (restricts a complete synthetic GT to the observed surface).
         backend: nearest-neighbour backend.
+        gt_index: the GT side prepared once (:func:`scannet_gt_points` indexed by
+            :class:`metrics.nn.NearestNeighborIndex`); ``gt_mesh`` and ``refuse_gt`` are then unused.
 
     Returns:
         :class:`MeshMetrics`; ``normal_consistency`` is NaN (the protocol has none); ``n_pred`` /
@@ -231,21 +237,36 @@ def evaluate_mesh_scannet(
     """
     Km, c2w, h, w = as_cameras(K, cam_to_world, H, W)
     clean_mesh(pred_mesh, "pred_mesh")
-    v_gt, f_gt = clean_mesh(gt_mesh, "gt_mesh")
     check_positive(threshold, "threshold")
     kw = dict(voxel_size=tsdf_voxel, sdf_trunc=tsdf_trunc, depth_trunc=depth_trunc,
               block_resolution=block_resolution_for(tsdf_voxel, tsdf_block))
-    if refuse_gt:
-        gt = _nonempty(tsdf_refuse(gt_mesh, Km, c2w, h, w, **kw), "gt_mesh (TSDF re-fused)")
-        v_gt = np.asarray(gt.vertices, dtype=np.float64)
+    if gt_index is None:
+        gv = scannet_gt_points(gt_mesh, Km, c2w, h, w, downsample_voxel, tsdf_voxel, tsdf_trunc, depth_trunc, tsdf_block, refuse_gt)
     else:
-        v_gt = v_gt[np.unique(f_gt)]
-    gv = voxel_downsample(v_gt, downsample_voxel)
+        gv = gt_index.points
     pred = tsdf_refuse(pred_mesh, Km, c2w, h, w, **kw)
     if len(pred.vertices) == 0:  # no camera sees any of pred
         return nothing_visible_metrics(threshold, gv.shape[0])
     pv = voxel_downsample(np.asarray(pred.vertices, dtype=np.float64), downsample_voxel)
-    return point_metrics(pv, gv, threshold, backend=backend)
+    return point_metrics(pv, gv, threshold, backend=backend, gt_index=gt_index if backend == "open3d" else None)
 
 
-__all__ = ["evaluate_mesh_replica", "evaluate_mesh_scannet", "nothing_visible_metrics", "render_depth_maps"]
+def scannet_gt_points(
+    gt_mesh: Any, K: Any, cam_to_world: Any, H: int, W: int, downsample_voxel: float = 0.02, tsdf_voxel: float = 0.01,
+    tsdf_trunc: float = 0.03, depth_trunc: float = 5.0, tsdf_block: float = MONOSDF_BLOCK_M, refuse_gt: bool = True,
+) -> np.ndarray:
+    """The GT side of :func:`evaluate_mesh_scannet` (same arguments): the GT's vertices (re-fused when
+    ``refuse_gt``) voxel-downsampled, (N, 3) metres. Prepared once per scene by ``bench.evaluate``."""
+    Km, c2w, h, w = as_cameras(K, cam_to_world, H, W)
+    v_gt, f_gt = clean_mesh(gt_mesh, "gt_mesh")
+    if refuse_gt:
+        kw = dict(voxel_size=tsdf_voxel, sdf_trunc=tsdf_trunc, depth_trunc=depth_trunc,
+                  block_resolution=block_resolution_for(tsdf_voxel, tsdf_block))
+        gt = _nonempty(tsdf_refuse(gt_mesh, Km, c2w, h, w, **kw), "gt_mesh (TSDF re-fused)")
+        v_gt = np.asarray(gt.vertices, dtype=np.float64)
+    else:
+        v_gt = v_gt[np.unique(f_gt)]
+    return voxel_downsample(v_gt, downsample_voxel)
+
+
+__all__ = ["evaluate_mesh_replica", "evaluate_mesh_scannet", "nothing_visible_metrics", "render_depth_maps", "scannet_gt_points"]

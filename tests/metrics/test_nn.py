@@ -74,3 +74,23 @@ def test_kdtree_results_come_back_in_the_callers_order(backend):
     db, ib = nearest_neighbor_bruteforce(q, ref)
     np.testing.assert_allclose(d, db, rtol=0, atol=1e-12)
     np.testing.assert_allclose(np.linalg.norm(q - ref[i], axis=1), db, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("backend", ["open3d", "scipy"])
+def test_prepared_index_matches_one_shot_queries(backend):
+    from metrics.mesh import point_metrics
+    from metrics.nn import NearestNeighborIndex
+
+    rng = np.random.default_rng(5)
+    gt, pred = rng.normal(size=(3000, 3)), rng.normal(size=(2000, 3)) * 1.1
+    gn, pn = rng.normal(size=(3000, 3)), rng.normal(size=(2000, 3))
+    index = NearestNeighborIndex(gt, backend)
+    d, i = index.query(pred)
+    db, ib = nearest_neighbor_bruteforce(pred, gt)
+    np.testing.assert_allclose(d, db, rtol=0, atol=1e-12)
+    d2, _ = NearestNeighborIndex(pred, backend).query_from(index)
+    np.testing.assert_allclose(d2, nearest_neighbor_bruteforce(gt, pred)[0], rtol=0, atol=1e-12)
+    once = point_metrics(pred, gt, 0.3, pn, gn, backend=backend).as_dict()
+    assert point_metrics(pred, gt, 0.3, pn, gn, backend=backend, gt_index=index).as_dict() == pytest.approx(once, rel=1e-12)
+    with pytest.raises(ValueError, match="gt_index holds"):
+        point_metrics(pred, gt[:10], 0.3, backend=backend, gt_index=index)

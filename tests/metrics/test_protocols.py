@@ -192,3 +192,17 @@ def test_fusion_blocks_keep_monosdf_width_in_metres(ring_cameras):
     m = evaluate_mesh_scannet(moved, gt, K, c2w, H, W, tsdf_voxel=0.02, tsdf_trunc=0.06)
     pv = voxel_downsample(np.asarray(tsdf_refuse(moved, K, c2w, H, W, block_resolution=8, **kw).vertices), 0.02)
     assert m.n_pred == pv.shape[0]
+
+
+def test_prepared_gt_index_gives_identical_metrics(ring_cameras):
+    """The GT side prepared once (downsampled points + nearest-neighbour index) is the one-shot protocol."""
+    from metrics.nn import NearestNeighborIndex
+    from metrics.protocols import scannet_gt_points
+
+    K, c2w, H, W = ring_cameras
+    gt = trimesh.creation.box((0.8, 0.8, 0.8))
+    pred = trimesh.creation.box((0.84, 0.8, 0.78))
+    kw = dict(tsdf_voxel=0.02, tsdf_trunc=0.06)
+    once = evaluate_mesh_scannet(pred, gt, K, c2w, H, W, **kw).as_dict()
+    index = NearestNeighborIndex(scannet_gt_points(gt, K, c2w, H, W, **kw))
+    assert evaluate_mesh_scannet(pred, None, K, c2w, H, W, gt_index=index, **kw).as_dict() == pytest.approx(once, rel=0, nan_ok=True)
