@@ -93,7 +93,8 @@ def point_metrics(
         gt_normals: optional (N, 3) normals of ``gt_points``. Both or neither must be given.
         backend: nearest-neighbour backend, see :func:`metrics.nn.nearest_neighbor`.
         gt_index: optional :class:`metrics.nn.NearestNeighborIndex` of ``gt_points`` built once (a GT
-            evaluated against many predictions); same results as without (KD-tree backends only).
+            evaluated against many predictions); used when its backend is ``backend`` (otherwise the
+            one-shot search runs); same results as without.
 
     Returns:
         :class:`MeshMetrics` (``normal_consistency`` NaN without normals).
@@ -115,7 +116,7 @@ def point_metrics(
         if gn.shape != g.shape:
             raise ValueError(f"gt_normals shape {gn.shape} must match gt_points shape {g.shape}")
 
-    if gt_index is not None and backend != "brute":
+    if gt_index is not None and gt_index.backend == backend:
         if len(gt_index) != g.shape[0]:
             raise ValueError(f"gt_index holds {len(gt_index)} points, gt_points {g.shape[0]}")
         d_p2g, i_p2g = gt_index.query(p)  # [M], for accuracy / precision

@@ -194,8 +194,7 @@ def evaluate_mesh_replica(
     if len(pred.faces) == 0:  # nothing of pred where the cameras look (or inside the GT box x bbox_scale)
         return nothing_visible_metrics(threshold, prepared_gt.points.shape[0])
     pp, pn = sample_mesh_surface(pred, n_samples, seed=seed)
-    index = prepared_gt.index if backend == "open3d" else None
-    return point_metrics(pp, prepared_gt.points, threshold, pn, prepared_gt.normals, backend=backend, gt_index=index)
+    return point_metrics(pp, prepared_gt.points, threshold, pn, prepared_gt.normals, backend=backend, gt_index=prepared_gt.index)
 
 
 def evaluate_mesh_scannet(
@@ -238,17 +237,21 @@ def evaluate_mesh_scannet(
     Km, c2w, h, w = as_cameras(K, cam_to_world, H, W)
     clean_mesh(pred_mesh, "pred_mesh")
     check_positive(threshold, "threshold")
-    kw = dict(voxel_size=tsdf_voxel, sdf_trunc=tsdf_trunc, depth_trunc=depth_trunc,
-              block_resolution=block_resolution_for(tsdf_voxel, tsdf_block))
     if gt_index is None:
         gv = scannet_gt_points(gt_mesh, Km, c2w, h, w, downsample_voxel, tsdf_voxel, tsdf_trunc, depth_trunc, tsdf_block, refuse_gt)
     else:
         gv = gt_index.points
-    pred = tsdf_refuse(pred_mesh, Km, c2w, h, w, **kw)
+    pred = tsdf_refuse(pred_mesh, Km, c2w, h, w, **_fusion_args(tsdf_voxel, tsdf_trunc, depth_trunc, tsdf_block))
     if len(pred.vertices) == 0:  # no camera sees any of pred
         return nothing_visible_metrics(threshold, gv.shape[0])
     pv = voxel_downsample(np.asarray(pred.vertices, dtype=np.float64), downsample_voxel)
-    return point_metrics(pv, gv, threshold, backend=backend, gt_index=gt_index if backend == "open3d" else None)
+    return point_metrics(pv, gv, threshold, backend=backend, gt_index=gt_index)
+
+
+def _fusion_args(tsdf_voxel: float, tsdf_trunc: float, depth_trunc: float, tsdf_block: float) -> dict[str, Any]:
+    """:func:`metrics.culling.tsdf_refuse` keyword arguments of the ScanNet protocol (pred and GT alike)."""
+    return dict(voxel_size=tsdf_voxel, sdf_trunc=tsdf_trunc, depth_trunc=depth_trunc,
+                block_resolution=block_resolution_for(tsdf_voxel, tsdf_block))
 
 
 def scannet_gt_points(
@@ -260,8 +263,7 @@ def scannet_gt_points(
     Km, c2w, h, w = as_cameras(K, cam_to_world, H, W)
     v_gt, f_gt = clean_mesh(gt_mesh, "gt_mesh")
     if refuse_gt:
-        kw = dict(voxel_size=tsdf_voxel, sdf_trunc=tsdf_trunc, depth_trunc=depth_trunc,
-                  block_resolution=block_resolution_for(tsdf_voxel, tsdf_block))
+        kw = _fusion_args(tsdf_voxel, tsdf_trunc, depth_trunc, tsdf_block)
         gt = _nonempty(tsdf_refuse(gt_mesh, Km, c2w, h, w, **kw), "gt_mesh (TSDF re-fused)")
         v_gt = np.asarray(gt.vertices, dtype=np.float64)
     else:
