@@ -7,6 +7,9 @@
     bench regress --table NAME [--scale small] [--update-reference]
                                                  fresh run vs results/reference/<scale>/<table>.json
     bench report [--out DIR]                     rebuild every table from stored results
+    bench study convergence METHOD SCENE [--seeds 0 1 2] [--snapshots 8] [--exact-priors]
+              [--set KEY=VALUE ...] [--sweep KEY=V1,V2] [--out DIR]
+                                                 F-score / depth error / beta / losses along the schedule
 
 Bad input (a missing file, a bad recipe, an unknown table) prints one line naming the file and the
 problem and exits with status 2.
@@ -205,6 +208,21 @@ def cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_study_convergence(args: argparse.Namespace) -> int:
+    from bench.study import parse_value, run_study
+
+    overrides = {}
+    for item in args.set or []:
+        if "=" not in item:
+            raise BenchInputError("--set", f"expected KEY=VALUE, got {item!r}")
+        k, v = item.split("=", 1)
+        overrides[k.strip()] = parse_value(v)
+    out = Path(args.out) if args.out else DEFAULT_OUT / "studies" / f"{args.method}-{Path(args.scene).name}-{args.scale}"
+    run_study(args.method, args.scene, args.scale, list(args.seeds), overrides, args.sweep, args.exact_priors, int(args.snapshots),
+              out, workers=args.workers)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     from bench.synth.recipe import SCALES
 
@@ -255,6 +273,20 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--scale", default="small", choices=SCALES)
     rep.add_argument("--out", default=str(DEFAULT_OUT))
     rep.set_defaults(func=cmd_report)
+
+    study = sub.add_parser("study", help="studies of one method on one scene").add_subparsers(dest="study_command", required=True)
+    conv = study.add_parser("convergence", help="metrics, depth error, beta and losses along the schedule (dense snapshots), over seeds")
+    conv.add_argument("method", help="a registered method (bench list)")
+    conv.add_argument("scene", help="a scene recipe name or a dataset folder")
+    conv.add_argument("--scale", default="small", choices=SCALES)
+    conv.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
+    conv.add_argument("--snapshots", type=int, default=8, help="evenly spaced snapshots along the schedule")
+    conv.add_argument("--exact-priors", action="store_true", help="GT depth and GT normals as the priors (the ceiling they allow)")
+    conv.add_argument("--set", nargs="+", default=None, metavar="KEY=VALUE", help="config overrides (YAML values)")
+    conv.add_argument("--sweep", default=None, metavar="KEY=V1,V2,...", help="repeat the study for each value of one config key")
+    conv.add_argument("--workers", type=int, default=None, help="parallel runs (default: one single-threaded run per core)")
+    conv.add_argument("--out", default=None, help="output folder (default results/runs/studies/METHOD-SCENE-SCALE)")
+    conv.set_defaults(func=cmd_study_convergence)
     return p
 
 

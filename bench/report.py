@@ -378,7 +378,8 @@ def check_claim(report: TableReport, claim: ClaimSpec) -> ClaimResult:
         ca, cb = report.cells[(ra, g, ma)], report.cells[(rb, g, mb)]
         if not (ca.has_value and cb.has_value):
             continue
-        ok = _compare(ca.mean, cb.mean, better, strict)
+        margin = claim.margin if claim.kind == "better" else 0.0
+        ok = _compare(ca.mean - margin if better == "higher" else ca.mean + margin, cb.mean, better, strict)
         holds &= ok
         partial |= ca.status == "partial" or cb.status == "partial"
         spread = ca.std + cb.std
@@ -387,7 +388,7 @@ def check_claim(report: TableReport, claim: ClaimSpec) -> ClaimResult:
             sp = f"|diff| {_fmt(abs(ca.mean - cb.mean))} {clear} the combined spread {_fmt(spread)}"
         else:
             sp = "spread unknown (one seed)"
-        rel = (">" if better == "higher" else "<") + ("" if strict else "=")
+        rel = (">" if better == "higher" else "<") + ("" if strict else "=") + (f" (by more than {_fmt(margin)})" if margin else "")
         details.append(
             f"[{g}] {ra} {ma} = {_fmt(ca.mean)} ± {_fmt(ca.std)} (n={ca.n}, {ca.n_seeds} seeds) "
             f"{rel} {rb} {mb} = {_fmt(cb.mean)} ± {_fmt(cb.std)} (n={cb.n}, {cb.n_seeds} seeds): "
@@ -398,7 +399,9 @@ def check_claim(report: TableReport, claim: ClaimSpec) -> ClaimResult:
         verdict = "HELD" if holds else "NOT HELD"
     paper_vals = [(_paper_value(spec, ra, g, ma), _paper_value(spec, rb, g, mb), better, strict)
                   for g, ra, ma, rb, mb, better, strict in pairs]
-    if all(a is not None and b is not None for a, b, _, _ in paper_vals):
+    if claim.margin and claim.kind == "better":
+        paper_verdict = "n/a"  # a margin is our acceptance bar, not a claim of the paper
+    elif all(a is not None and b is not None for a, b, _, _ in paper_vals):
         paper_verdict = "HELD" if all(_compare(a, b, bt, st) for a, b, bt, st in paper_vals) else "NOT HELD"  # type: ignore[arg-type]
     else:
         paper_verdict = "n/a"

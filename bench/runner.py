@@ -178,6 +178,8 @@ def run_job(job: Job, cache_dir: Path = DEFAULT_CACHE, progress: Callable[[float
         t = time.perf_counter()
         for i, snap in enumerate(artifacts.snapshots):
             point = {"fraction": snap.fraction, "iterations": snap.iterations, "seconds": snap.seconds}
+            if snap.diagnostics:
+                point["diagnostics"] = dict(snap.diagnostics)
             try:
                 point["metrics"] = evaluate_snapshot(snap, scene, plan.protocol, plan.scale, seed=plan.seed)
             except ValueError as exc:  # e.g. an empty mesh early in the schedule: that point has no metrics

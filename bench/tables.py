@@ -48,6 +48,7 @@ metrics).
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -143,6 +144,7 @@ class ClaimSpec:
     strict: bool = True
     metric_a: str | None = None
     metric_b: str | None = None
+    margin: float = 0.0  # "better" claims: row_a must beat row_b by more than this (metric units)
 
 
 @dataclass(frozen=True)
@@ -410,7 +412,7 @@ def _claim(ctx: _Ctx, obj: Any, key: str, groups: tuple[DatasetGroup, ...], rows
         row_names = (ctx.string(d["row"], f"{key}.row"),) if "row" in d else ctx.strlist(d["rows"], f"{key}.rows")
         direction = None
     else:
-        d = ctx.mapping(obj, key, common | {"metric", "row_a", "row_b"}, {"direction"})
+        d = ctx.mapping(obj, key, common | {"metric", "row_a", "row_b"}, {"direction", "margin"})
         row_names = (ctx.string(d["row_a"], f"{key}.row_a"), ctx.string(d["row_b"], f"{key}.row_b"))
         direction = ctx.choice(d["direction"], f"{key}.direction", DIRECTIONS) if "direction" in d else None
     g = d["group"]
@@ -447,7 +449,14 @@ def _claim(ctx: _Ctx, obj: Any, key: str, groups: tuple[DatasetGroup, ...], rows
         strict=ctx.boolean(d.get("strict", True), f"{key}.strict"),
         metric_a=d.get("metric_a"),
         metric_b=d.get("metric_b"),
+        margin=_margin(ctx, d.get("margin", 0.0), f"{key}.margin"),
     )
+
+
+def _margin(ctx: _Ctx, value: Any, key: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(float(value)) or value < 0:
+        raise ctx.fail(key, f"expected a number >= 0, got {value!r}")
+    return float(value)
 
 
 # --------------------------------------------------------------------------------------------------

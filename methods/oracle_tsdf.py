@@ -1,4 +1,8 @@
-"""Oracle reference: TSDF fusion of the GROUND-TRUTH depth maps with open3d (an upper bound).
+"""Reference rows by TSDF fusion with open3d: the oracle (GROUND-TRUTH depth, an upper bound) and
+"priors only" (``depth_source: prior_aligned``: the monocular depth prior aligned per view to the GT depth
+by least-squares scale + shift over the pixels where both are valid, ``metrics.depth.align_depth``; it uses
+GT for the alignment, so it is labelled GT-aligned. It tells what the priors alone carry: a neural method
+that does not beat it adds nothing to its priors).
 
 Not a method of the paper: it sees GT depth, which no real method has. It exists so the path
 run -> metrics -> CSV / markdown works end to end, and as a ceiling for every table. Snapshots fuse
@@ -12,16 +16,44 @@ from __future__ import annotations
 import time
 from typing import Any
 
+import numpy as np
+
 from bench.errors import BenchInputError
 from bench.scene import Scene
 from methods.base import Artifacts, ProgressFn, Snapshot
 from methods.registry import register
 from metrics.culling import MONOSDF_BLOCK_M, block_resolution_for, tsdf_refuse
+from metrics.depth import align_depth
+
+
+def fusion_depth(scene: Scene, views: np.ndarray, source: str) -> np.ndarray:
+    """(V, H, W) float32 depth maps (m) of ``views`` to fuse: ``gt`` or ``prior_aligned`` (the mono prior
+    with its per-view least-squares scale + shift against GT; pixels where either is 0 stay 0)."""
+    gt = scene.gt_depth[views].astype(np.float32)
+    if source == "gt":
+        return gt
+    if source != "prior_aligned":
+        raise BenchInputError("depth_source", f"must be 'gt' or 'prior_aligned', got {source!r}")
+    if scene.mono_depth is None:
+        raise BenchInputError(scene.root or scene.name, "depth_source: prior_aligned needs a monocular depth prior")
+    out = np.zeros_like(gt)
+    for i, v in enumerate(views):
+        prior = scene.mono_depth[v].astype(np.float64)
+        valid = (prior > 0) & (gt[i] > 0)
+        if valid.sum() < 2:
+            continue
+        try:
+            s, t = align_depth(prior, gt[i], valid, mode="scale_shift")
+        except ValueError:  # a constant prior: no alignment, nothing fused from this view
+            continue
+        out[i] = np.where(prior > 0, np.maximum(s * prior + t, 0.0), 0.0).astype(np.float32)
+    return out
 
 
 @register("oracle_tsdf")
 class OracleTSDF:
-    """TSDF fusion of GT depth (upper bound). Config: ``voxel_size`` (m), ``trunc_voxels``, ``depth_trunc`` (m), ``block_m`` (fusion block width,
+    """TSDF fusion of GT depth (upper bound) or of the GT-aligned prior. Config: ``depth_source`` (gt |
+    prior_aligned), ``voxel_size`` (m), ``trunc_voxels``, ``depth_trunc`` (m), ``block_m`` (fusion block width,
     m: MonoSDF's 16 cm), ``fractions``."""
 
     name = "oracle_tsdf"
@@ -30,6 +62,7 @@ class OracleTSDF:
         if scene.gt_depth is None:
             raise BenchInputError(scene.root or scene.name, "oracle_tsdf needs GT depth maps (synthetic scenes have them)")
         views = scene.view_indices("train")
+        depth = fusion_depth(scene, views, str(config.get("depth_source", "gt")))
         voxel = float(config["voxel_size"])
         snapshots: list[Snapshot] = []
         t0 = time.perf_counter()
@@ -39,7 +72,7 @@ class OracleTSDF:
             sel = views[:k]
             t = time.perf_counter()
             mesh = tsdf_refuse(None, scene.intrinsics[sel], scene.cam_to_world[sel], scene.height, scene.width, voxel_size=voxel,
-                               sdf_trunc=float(config["trunc_voxels"]) * voxel, depth_trunc=float(config["depth_trunc"]), depth_maps=scene.gt_depth[sel],
+                               sdf_trunc=float(config["trunc_voxels"]) * voxel, depth_trunc=float(config["depth_trunc"]), depth_maps=depth[:k],
                                block_resolution=block_resolution_for(voxel, float(config.get("block_m", MONOSDF_BLOCK_M))))
             fuse_seconds = time.perf_counter() - t
             snapshots.append(Snapshot(fraction=float(frac), iterations=int(k), seconds=fuse_seconds, mesh=mesh))

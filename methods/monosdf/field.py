@@ -1,6 +1,8 @@
 """The SDF and colour networks (MonoSDF's grid variant, scaled down for a CPU).
 
-SDF network: ``[grid features(x / R), x / R] -> Softplus(beta=100) MLP -> (sdf, geometry feature)``.
+SDF network: ``[grid features(x / R), PE(x / R)] -> Softplus(beta=100) MLP -> (sdf, geometry feature)``, with
+``PE(u) = [u, sin(2^k u), cos(2^k u)]_{k < pe_frequencies}`` (MonoSDF's grid config: ``multires = 6``;
+``pe_frequencies = 0`` feeds ``u`` alone).
 Its spatial gradient (normals, eikonal term) is computed EXPLICITLY as differentiable tensor ops: the
 grid returns ``d feat / d x`` analytically, and the MLP's vector-Jacobian product for its single SDF
 output is written out layer by layer (``g <- (g * softplus'(z)) @ W``, softplus' = a sigmoid). The
@@ -69,17 +71,43 @@ class SDFNetwork(torch.nn.Module):
     """
 
     def __init__(self, spec: GridSpec, hidden: int = 64, layers: int = 2, geo_features: int = 15, radius: float = 1.0,
-                 init_radius: float = 0.6, inside_out: bool = True, fast_grid: bool = True, seed: int = 0) -> None:
+                 init_radius: float = 0.6, inside_out: bool = True, fast_grid: bool = True, seed: int = 0,
+                 pe_frequencies: int = 0) -> None:
         super().__init__()
         torch.manual_seed(seed)
         self.grid = FeatureGrid(spec, fast=fast_grid, seed=seed)
         self.radius = float(radius)
-        dims = [spec.out_dim + 3] + [hidden] * layers + [1 + geo_features]
+        self.pe_frequencies = int(pe_frequencies)
+        self.register_buffer("pe_freqs", 2.0 ** torch.arange(self.pe_frequencies, dtype=torch.float32), persistent=False)
+        dims = [spec.out_dim + 3 * (1 + 2 * self.pe_frequencies)] + [hidden] * layers + [1 + geo_features]
         self.linears = torch.nn.ModuleList(torch.nn.Linear(dims[i], dims[i + 1]) for i in range(len(dims) - 1))
         self._geometric_init(spec.out_dim, init_radius, inside_out)
 
+    def encode(self, u: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
+        """Positional encoding of ``u = x / R`` (P, 3) -> (PE (P, 3 + 6F) as ``[u, sin(f_k u), cos(f_k u)]``
+        with the k-major layout ``[sin k=0 xyz, ..., sin k=F-1 xyz, cos ...]``, f u (P, F, 3) and its sin / cos
+        for the gradient; None without frequencies)."""
+        if self.pe_frequencies == 0:
+            return u, None, None
+        fu = u[:, None, :] * self.pe_freqs[None, :, None]  # (P, F, 3)
+        sin, cos = torch.sin(fu), torch.cos(fu)
+        P = u.shape[0]
+        return torch.cat([u, sin.reshape(P, -1), cos.reshape(P, -1)], dim=-1), sin, cos
+
+    def _pe_backward(self, g: torch.Tensor, sin: torch.Tensor | None, cos: torch.Tensor | None) -> torch.Tensor:
+        """d sdf / d u from the gradient ``g`` (P, 3 + 6F) w.r.t. the encoding (chain rule of :meth:`encode`)."""
+        out = g[:, :3]
+        if sin is None or cos is None:
+            return out
+        F_ = self.pe_frequencies
+        P = g.shape[0]
+        g_sin = g[:, 3 : 3 + 3 * F_].reshape(P, F_, 3)
+        g_cos = g[:, 3 + 3 * F_ :].reshape(P, F_, 3)
+        return out + ((g_sin * cos - g_cos * sin) * self.pe_freqs[None, :, None]).sum(1)
+
     def _geometric_init(self, n_grid: int, r: float, inside_out: bool) -> None:
-        """IDR geometric init: a sphere SDF of radius r in normalised-by-R coordinates."""
+        """IDR geometric init: a sphere SDF of radius r in normalised-by-R coordinates (grid features and
+        positional-encoding frequencies start with zero first-layer weights: the MLP sees only x)."""
         r_norm = r / self.radius
         for i, lin in enumerate(self.linears):
             out_dim, in_dim = lin.weight.shape
@@ -90,8 +118,9 @@ class SDFNetwork(torch.nn.Module):
             else:
                 torch.nn.init.constant_(lin.bias, 0.0)
                 torch.nn.init.normal_(lin.weight, 0.0, math.sqrt(2) / math.sqrt(out_dim))
-                if i == 0:  # grid features start switched off: the MLP sees only x at init
+                if i == 0:  # grid features and PE frequencies start switched off: the MLP sees only x at init
                     torch.nn.init.constant_(lin.weight[:, :n_grid], 0.0)
+                    torch.nn.init.constant_(lin.weight[:, n_grid + 3 :], 0.0)
 
     def forward(self, x: torch.Tensor, with_gradient: bool = True) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
         """Evaluate the field.
@@ -105,7 +134,8 @@ class SDFNetwork(torch.nn.Module):
         """
         xs = x / self.radius
         feat, jac = self.grid(xs, with_jacobian=with_gradient)
-        a = torch.cat([feat, xs], dim=-1)
+        pe, sin, cos = self.encode(xs)
+        a = torch.cat([feat, pe], dim=-1)
         slopes = []
         for lin in self.linears[:-1]:
             a, slope = _softplus_and_slope(lin(a), self.grid.fast)
@@ -120,7 +150,7 @@ class SDFNetwork(torch.nn.Module):
             for lin, slope in zip(reversed(self.linears[:-1]), reversed(slopes)):
                 g = (g * slope) @ lin.weight  # (P, in)
             c = jac.shape[-1]
-            grad = jacobian_contract(jac, g[:, :c], self.grid.fast) + g[:, c:]  # (P, 3); the 1/R and x R cancel
+            grad = jacobian_contract(jac, g[:, :c], self.grid.fast) + self._pe_backward(g[:, c:], sin, cos)  # (P, 3); 1/R and x R cancel
         # bounding-sphere clamp (MonoSDF): every ray terminates inside the sphere
         norm = x.norm(dim=-1)
         sphere = self.radius - norm
@@ -139,7 +169,7 @@ def sdf_gradient_autograd(net: SDFNetwork, x: torch.Tensor) -> torch.Tensor:
     x = x.detach().requires_grad_(True)
     xs = x / net.radius
     feat, _ = interpolate_reference(net.grid.table, xs, net.grid.spec, with_jacobian=False)
-    a = torch.cat([feat, xs], dim=-1)
+    a = torch.cat([feat, net.encode(xs)[0]], dim=-1)
     for lin in net.linears[:-1]:
         a = F.softplus(lin(a), beta=SOFTPLUS_BETA)
     sdf = torch.minimum(net.linears[-1](a)[:, 0] * net.radius, net.radius - x.norm(dim=-1))
@@ -147,11 +177,19 @@ def sdf_gradient_autograd(net: SDFNetwork, x: torch.Tensor) -> torch.Tensor:
 
 
 class ColorNetwork(torch.nn.Module):
-    """MonoSDF's rendering network, scaled down: ``[x, view dir, normal, geo feature] -> MLP -> sigmoid RGB``."""
+    """MonoSDF's rendering network, scaled down: ``[x, view dir, normal, geo feature, image code] -> MLP ->
+    sigmoid RGB``.
 
-    def __init__(self, geo_features: int = 15, hidden: int = 64, layers: int = 1) -> None:
+    ``appearance_dim > 0`` gives every training image a learned code of that size (MonoSDF's and the
+    MonoInstance release's ``per_image_code = True``: 32-d, NeRF-in-the-wild), so per-image exposure /
+    white balance is explained by the code instead of by the geometry. Codes start at U(-1e-4, 1e-4)
+    (MonoSDF)."""
+
+    def __init__(self, geo_features: int = 15, hidden: int = 64, layers: int = 1, appearance_dim: int = 0, num_images: int = 0) -> None:
         super().__init__()
-        dims = [9 + geo_features] + [hidden] * layers + [3]
+        self.appearance_dim = int(appearance_dim)
+        self.codes = torch.nn.Parameter(torch.empty(int(num_images) if self.appearance_dim else 0, self.appearance_dim).uniform_(-1e-4, 1e-4))
+        dims = [9 + geo_features + self.appearance_dim] + [hidden] * layers + [3]
         mods: list[torch.nn.Module] = []
         for i in range(len(dims) - 1):
             mods.append(torch.nn.Linear(dims[i], dims[i + 1]))
@@ -159,9 +197,18 @@ class ColorNetwork(torch.nn.Module):
                 mods.append(torch.nn.ReLU())
         self.mlp = torch.nn.Sequential(*mods)
 
-    def forward(self, x: torch.Tensor, view_dirs: torch.Tensor, normals: torch.Tensor, geo: torch.Tensor) -> torch.Tensor:
-        """x, view_dirs, normals: (P, 3); geo: (P, G) -> rgb (P, 3) in [0, 1]."""
-        return torch.sigmoid(self.mlp(torch.cat([x, view_dirs, normals, geo], dim=-1)))
+    def forward(self, x: torch.Tensor, view_dirs: torch.Tensor, normals: torch.Tensor, geo: torch.Tensor,
+                image: int | torch.Tensor | None = None) -> torch.Tensor:
+        """x, view_dirs, normals: (P, 3); geo: (P, G); image: training slot whose code is used, an int or
+        (P,) per point (None = the mean code, for views without one) -> rgb (P, 3) in [0, 1]."""
+        parts = [x, view_dirs, normals, geo]
+        if self.appearance_dim:
+            if isinstance(image, torch.Tensor):
+                parts.append(self.codes[image])
+            else:
+                code = self.codes.mean(0) if image is None else self.codes[int(image)]
+                parts.append(code.expand(x.shape[0], self.appearance_dim))
+        return torch.sigmoid(self.mlp(torch.cat(parts, dim=-1)))
 
 
 class LaplaceDensity(torch.nn.Module):

@@ -20,6 +20,14 @@ def eikonal_loss(grad: torch.Tensor) -> torch.Tensor:
     return ((grad.norm(dim=-1) - 1.0) ** 2).mean()
 
 
+def smoothness_loss(grad: torch.Tensor, grad_neighbour: torch.Tensor) -> torch.Tensor:
+    """UNISURF / MonoSDF smoothness: mean |n(x) - n(x + jitter)| of the unit normals of points and their
+    jittered neighbours (normals = grad / (|grad| + 1e-5), MonoSDF's guard). grad, grad_neighbour: (P, 3)."""
+    n1 = grad / (grad.norm(dim=-1, keepdim=True) + 1e-5)
+    n2 = grad_neighbour / (grad_neighbour.norm(dim=-1, keepdim=True) + 1e-5)
+    return (n1 - n2).norm(dim=-1).mean()
+
+
 def solve_scale_shift(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor, eps: float = 1e-8) -> tuple[torch.Tensor, torch.Tensor]:
     """Closed-form weighted least squares ``min_{s,t} sum w (s * pred + t - target)^2`` (MiDaS / MonoSDF).
 

@@ -42,6 +42,11 @@ class RenderOutput:
     t: torch.Tensor
     extra_grad: torch.Tensor | None = None
 
+    def select(self, rows: slice | torch.Tensor) -> "RenderOutput":
+        """The same outputs for a subset of the rays (``extra_grad`` is dropped: it is not per ray)."""
+        return RenderOutput(rgb=self.rgb[rows], depth=self.depth[rows], normal=self.normal[rows], acc=self.acc[rows],
+                            weights=self.weights[rows], grad=self.grad[rows], sdf=self.sdf[rows], t=self.t[rows])
+
 
 def composite_weights(sdf: torch.Tensor, t: torch.Tensor, density: LaplaceDensity, beta: torch.Tensor | None = None) -> torch.Tensor:
     """VolSDF weights ``w_i = T_i (1 - exp(-sigma_i delta_i))`` along rays.
@@ -142,6 +147,8 @@ def render_rays(
     gen: torch.Generator | None = None,
     jitter: bool = True,
     extra_points: torch.Tensor | None = None,
+    t: torch.Tensor | None = None,
+    image: int | torch.Tensor | None = None,
 ) -> RenderOutput:
     """Render R rays.
 
@@ -152,10 +159,15 @@ def render_rays(
         extra_points: (E, 3) points whose SDF gradients are wanted too (the eikonal term's uniform
             points): evaluated in the same SDF pass as the samples (one grid call and one table-sized
             gradient buffer instead of two), returned in ``RenderOutput.extra_grad``.
+        t: (R, S) sample distances from :func:`hierarchical_samples` when the caller drew them already
+            (e.g. to place eikonal points beside them); None = draw them here.
+        image: training slot of the rays, an int or (R,) per ray (selects the colour network's per-image
+            code; None = the mean code).
     """
     R = dirs.shape[0]
     origins = origins.expand(R, 3)
-    t = hierarchical_samples(sdf_net, density, origins, dirs, far, near, n_coarse, n_fine, gen, jitter)
+    if t is None:
+        t = hierarchical_samples(sdf_net, density, origins, dirs, far, near, n_coarse, n_fine, gen, jitter)
     S = t.shape[1]
     pts = origins[:, None, :] + dirs[:, None, :] * t[..., None]
     flat = pts.reshape(-1, 3)
@@ -165,7 +177,9 @@ def render_rays(
     sdf, geo, grad = sdf[: R * S], geo[: R * S], grad[: R * S]  # the ray samples (views without extra points)
     normals = F.normalize(grad, dim=-1, eps=1e-8)
     view = dirs[:, None, :].expand(R, S, 3).reshape(-1, 3)
-    rgb_s = color_net(flat, view, normals, geo).reshape(R, S, 3)
+    if isinstance(image, torch.Tensor):
+        image = image[:, None].expand(R, S).reshape(-1)
+    rgb_s = color_net(flat, view, normals, geo, image).reshape(R, S, 3)
     sdf = sdf.reshape(R, S)
     w = composite_weights(sdf, t, density)
     acc = w.sum(-1)

@@ -26,9 +26,9 @@ from bench.scene import Scene
 from methods.base import Snapshot
 from methods.monosdf.field import ColorNetwork, LaplaceDensity, SDFNetwork
 from methods.monosdf.grid import make_grid_spec
-from methods.monosdf.losses import color_loss, eikonal_loss, normal_loss, ssi_depth_loss
+from methods.monosdf.losses import color_loss, eikonal_loss, normal_loss, smoothness_loss, ssi_depth_loss
 from methods.monosdf.rays import build_rays, normalisation
-from methods.monosdf.render import RenderOutput, render_depth, render_rays
+from methods.monosdf.render import RenderOutput, hierarchical_samples, render_depth, render_rays
 
 PixelSampler = Callable[[int, int, torch.Generator], torch.Tensor]
 
@@ -64,8 +64,9 @@ class MonoSDFTrainer:
         spec = make_grid_spec(cfg["grid_levels"], cfg["grid_features"], cfg["grid_log2_table"], cfg["grid_base_res"], cfg["grid_max_res"])
         self.sdf = SDFNetwork(spec, hidden=cfg["mlp_hidden"], layers=cfg["mlp_layers"], geo_features=cfg["geo_features"],
                               radius=self.radius, init_radius=cfg["init_radius"], inside_out=resolve_inside_out(cfg["inside_out"], scene),
-                              fast_grid=cfg["fast_grid"], seed=seed)
-        self.color = ColorNetwork(cfg["geo_features"], cfg["color_hidden"], cfg["color_layers"])
+                              fast_grid=cfg["fast_grid"], seed=seed, pe_frequencies=int(cfg.get("pe_frequencies", 0)))
+        self.color = ColorNetwork(cfg["geo_features"], cfg["color_hidden"], cfg["color_layers"],
+                                  appearance_dim=int(cfg.get("appearance_dim", 0)), num_images=V)
         self.density = LaplaceDensity(cfg["beta_init"], cfg["beta_min"])
         lr = float(cfg["lr"])
         mlp_params = [p for n, p in self.sdf.named_parameters() if not n.startswith("grid.")]
@@ -75,6 +76,8 @@ class MonoSDFTrainer:
         ], betas=(0.9, 0.99), eps=1e-15, fused=True)
         self.base_lrs = [g["lr"] for g in self.optim.param_groups]
         self.step_count = 0
+        self._log_sums: dict[str, float] = {}
+        self._log_count = 0
 
     def _prior(self, arr: np.ndarray | None, shape: tuple[int, ...]) -> torch.Tensor | None:
         if arr is None:
@@ -82,13 +85,15 @@ class MonoSDFTrainer:
         return torch.from_numpy(np.ascontiguousarray(arr[self.views]).reshape(shape).astype(np.float32))
 
     # ------------------------------------------------------------------ one step
-    def render_pixels(self, view: int, pixels: torch.Tensor, jitter: bool = True, extra_points: torch.Tensor | None = None) -> RenderOutput:
-        """Render ``pixels`` (flat indices) of training view slot ``view`` (0..V-1); ``extra_points``
-        (E, 3): also their SDF gradients (``RenderOutput.extra_grad``)."""
+    def render_pixels(self, view: int, pixels: torch.Tensor, jitter: bool = True, extra_points: torch.Tensor | None = None,
+                      t: torch.Tensor | None = None) -> RenderOutput:
+        """Render ``pixels`` (flat indices) of training view slot ``view`` (0..V-1) with that image's
+        appearance code; ``extra_points`` (E, 3): also their SDF gradients (``RenderOutput.extra_grad``);
+        ``t``: distances from :func:`hierarchical_samples` (None = sample here)."""
         r = self.rays
         return render_rays(self.sdf, self.color, self.density, r.origins[view], r.dirs[view, pixels], r.z_factor[view, pixels],
                            r.far[view, pixels], r.world_to_cam_rot[view], self.cfg["near"], self.cfg["n_coarse"], self.cfg["n_fine"],
-                           self.gen, jitter, extra_points=extra_points)
+                           self.gen, jitter, extra_points=extra_points, t=t, image=view)
 
     def _set_lr(self) -> None:
         frac = min(self.step_count / max(int(self.cfg["iterations"]), 1), 1.0)
@@ -96,24 +101,12 @@ class MonoSDFTrainer:
         for g, base in zip(self.optim.param_groups, self.base_lrs):
             g["lr"] = base * decay
 
-    def step(self, view: int | None = None) -> dict[str, float]:
-        """One optimisation step on training slot ``view`` (random when None); returns the loss terms."""
+    def _per_image_terms(self, view: int, pixels: torch.Tensor, out: RenderOutput) -> dict[str, tuple[float, torch.Tensor]]:
+        """The loss terms fitted per image on the rays ``pixels`` of slot ``view``: the scale-and-shift-
+        invariant depth (one closed-form fit per image, never across images), the normal terms (L1,
+        angular) and the ``extra_losses`` hooks (MonoInstance's mask constraint)."""
         cfg = self.cfg
-        if view is None:
-            view = int(torch.randint(0, len(self.views), (1,), generator=self.gen))
-        pixels = self.pixel_sampler(view, int(cfg["rays_per_batch"]), self.gen)
-        # eikonal: uniform points in the bounding cube (their gradients come from the rendering's SDF
-        # pass) + the highest-weight sample of each ray (MonoSDF)
-        n_uni = int(cfg["rays_per_batch"])
-        uni = (torch.rand(n_uni, 3, generator=self.gen) * 2 - 1) * self.radius
-        out = self.render_pixels(view, pixels, extra_points=uni)
-        terms: dict[str, tuple[float, torch.Tensor]] = {"color": (float(cfg["color_weight"]), color_loss(out.rgb, self.rgb[view, pixels]))}
-        g_uni = out.extra_grad
-        assert g_uni is not None
-        best = out.weights.detach().argmax(-1)
-        g_surf = out.grad[torch.arange(out.grad.shape[0]), best]
-        terms["eikonal"] = (float(cfg["eikonal_weight"]), eikonal_loss(torch.cat([g_uni, g_surf])))
-
+        terms: dict[str, tuple[float, torch.Tensor]] = {}
         w = self.prior_weight[view, pixels]
         if self.prior_depth is not None and cfg["depth_weight"] > 0:
             terms["depth"] = (float(cfg["depth_weight"]), ssi_depth_loss(out.depth, self.prior_depth[view, pixels], w))
@@ -123,6 +116,74 @@ class MonoSDFTrainer:
             terms["normal_cos"] = (float(cfg["normal_weight"]), ang)
         for extra in self.extra_losses:
             terms.update(extra(self, view, pixels, out))
+        return terms
+
+    def step(self, view: int | None = None) -> dict[str, float]:
+        """One optimisation step; returns the loss terms.
+
+        ``rays_per_batch`` rays from ``images_per_batch`` distinct training images drawn at random
+        (MonoSDF: one image per step; ``view`` forces the single slot ``view``). The colour and eikonal
+        terms are means over all rays; the per-image terms (:meth:`_per_image_terms`) are computed per
+        image and averaged over the images."""
+        cfg = self.cfg
+        k = max(1, int(cfg.get("images_per_batch", 1)))
+        if view is not None:
+            views = [int(view)]
+        elif k == 1:
+            views = [int(torch.randint(0, len(self.views), (1,), generator=self.gen))]
+        else:
+            views = torch.randperm(len(self.views), generator=self.gen)[: min(k, len(self.views))].tolist()
+        n_each = max(1, int(cfg["rays_per_batch"]) // len(views))
+        groups = [(v, self.pixel_sampler(v, n_each, self.gen)) for v in views]
+        slot = torch.cat([torch.full((len(p),), v, dtype=torch.long) for v, p in groups])
+        pixels = torch.cat([p for _, p in groups])
+        R = len(pixels)
+        r = self.rays
+        origins, dirs = r.origins[slot], r.dirs[slot, pixels]
+        t = hierarchical_samples(self.sdf, self.density, origins, dirs, r.far[slot, pixels], cfg["near"], cfg["n_coarse"], cfg["n_fine"],
+                                 self.gen, True)
+        # eikonal points (MonoSDF): R uniform points in the bounding cube + one sample of each ray
+        # (``eikonal_ray_sample``: "random" = MonoSDF, "max_weight" = the highest-weight sample; the ray
+        # sample's gradient comes from the rendering itself); with ``smooth_weight`` > 0 also a neighbour of
+        # each, jittered by U(-smooth_jitter/2, smooth_jitter/2) per axis (MonoSDF / UNISURF: 0.01). All
+        # extra points ride in the rendering's SDF pass.
+        uni = (torch.rand(R, 3, generator=self.gen) * 2 - 1) * self.radius
+        rows = torch.arange(R)
+        mode = str(cfg.get("eikonal_ray_sample", "max_weight"))
+        smooth_w = float(cfg.get("smooth_weight", 0.0))
+        pick = torch.randint(0, t.shape[1], (R,), generator=self.gen) if mode == "random" else None
+        extra = [uni]
+        if smooth_w > 0:
+            jit = float(cfg.get("smooth_jitter", 0.01))
+            extra.append(uni + (torch.rand(R, 3, generator=self.gen) - 0.5) * jit)
+            if pick is not None:
+                surf = origins + dirs * t[rows, pick][:, None]
+                extra.append(surf + (torch.rand(R, 3, generator=self.gen) - 0.5) * jit)
+        single = len(views) == 1
+        out = render_rays(self.sdf, self.color, self.density, origins, dirs, r.z_factor[slot, pixels], r.far[slot, pixels],
+                          r.world_to_cam_rot[views[0]] if single else r.world_to_cam_rot[slot], cfg["near"], cfg["n_coarse"],
+                          cfg["n_fine"], self.gen, True, extra_points=torch.cat(extra), t=t, image=views[0] if single else slot)
+        terms: dict[str, tuple[float, torch.Tensor]] = {"color": (float(cfg["color_weight"]), color_loss(out.rgb, self.rgb[slot, pixels]))}
+        g_extra = out.extra_grad
+        assert g_extra is not None
+        g_uni = g_extra[:R]
+        if pick is None:
+            pick = out.weights.detach().argmax(-1)
+        g_surf = out.grad[rows, pick]
+        terms["eikonal"] = (float(cfg["eikonal_weight"]), eikonal_loss(torch.cat([g_uni, g_surf])))
+        if smooth_w > 0:
+            own = torch.cat([g_uni, g_surf]) if len(extra) == 3 else g_uni
+            terms["smooth"] = (smooth_w, smoothness_loss(own, g_extra[R:]))
+
+        per_image: dict[str, list[tuple[float, torch.Tensor]]] = {}
+        start = 0
+        for v, pix in groups:
+            o = out if single else out.select(slice(start, start + len(pix)))
+            start += len(pix)
+            for name, term in self._per_image_terms(v, pix, o).items():
+                per_image.setdefault(name, []).append(term)
+        for name, items in per_image.items():
+            terms[name] = (items[0][0], torch.stack([val for _, val in items]).mean())
 
         loss = sum(wt * val for wt, val in terms.values())
         self._set_lr()
@@ -133,7 +194,51 @@ class MonoSDFTrainer:
         logs = {k: float(v.detach()) for k, (_, v) in terms.items()}
         logs["loss"] = float(loss.detach())
         logs["beta"] = float(self.density.beta().detach())
+        for k, v in logs.items():
+            self._log_sums[k] = self._log_sums.get(k, 0.0) + v
+        self._log_count += 1
         return logs
+
+    def diagnostics(self, mesh: trimesh.Trimesh | None = None) -> dict[str, float]:
+        """Numbers for the convergence study at a snapshot: ``beta``; ``loss_<term>``, each loss term
+        averaged over the steps since the previous call (then reset); with ``diag_views`` > 0 and GT depth,
+        ``depth_err_median`` / ``depth_err_p90``: median / 90th percentile of |rendered z-depth - GT| (m)
+        over that many evenly spaced training views at every ``diag_stride``-th pixel where GT > 0; with a
+        ``mesh`` (world metres) also ``mesh_depth_err_median`` (the mesh ray-cast at the same pixels
+        against GT) and ``mesh_ahead_frac``: the fraction of those pixels where the mesh surface lies more
+        than 10 cm in front of the volume-rendered depth (surfaces the rendering does not weigh)."""
+        out = {"beta": float(self.density.beta().detach())}
+        n = max(self._log_count, 1)
+        out.update({f"loss_{k}": v / n for k, v in self._log_sums.items() if k != "beta"})
+        self._log_sums, self._log_count = {}, 0
+        k = int(self.cfg.get("diag_views", 0))
+        if k > 0 and self.scene.gt_depth is not None:
+            stride = int(self.cfg.get("diag_stride", 2))
+            errs, mesh_errs, ahead = [], [], []
+            slots = np.unique(np.linspace(0, len(self.views) - 1, k).round().astype(int))
+            mesh_depth = None
+            if mesh is not None and len(mesh.faces):
+                from metrics.culling import render_depth_maps
+
+                v = self.views[slots]
+                mesh_depth = render_depth_maps(mesh, self.scene.intrinsics[v], self.scene.cam_to_world[v], self.scene.height, self.scene.width)
+            for i, slot in enumerate(slots):
+                gt = self.scene.gt_depth[self.views[slot]][::stride, ::stride]
+                pred = self.render_view_depth(int(slot), stride=stride)
+                errs.append(np.abs(pred - gt)[gt > 0])
+                if mesh_depth is not None:
+                    md = mesh_depth[i][::stride, ::stride]
+                    hit = (gt > 0) & (md > 0)
+                    mesh_errs.append(np.abs(md - gt)[hit])
+                    ahead.append((hit & (md < pred - 0.10))[gt > 0])
+            e = np.concatenate(errs) if errs else np.zeros(0)
+            if len(e):
+                out["depth_err_median"] = float(np.median(e))
+                out["depth_err_p90"] = float(np.percentile(e, 90))
+            if mesh_errs and len(np.concatenate(mesh_errs)):
+                out["mesh_depth_err_median"] = float(np.median(np.concatenate(mesh_errs)))
+                out["mesh_ahead_frac"] = float(np.concatenate(ahead).mean())
+        return out
 
     # ------------------------------------------------------------------ outputs
     @torch.no_grad()
@@ -223,7 +328,8 @@ def train_with_snapshots(
 
     Returns:
         (snapshots; seconds = start_seconds + training + events so far + this snapshot's mesh extraction,
-        earlier extractions excluded), train seconds, mesh seconds of the last snapshot.
+        earlier extractions excluded; each with :meth:`MonoSDFTrainer.diagnostics`, whose own time is not
+        counted), train seconds, mesh seconds of the last snapshot.
     """
     events = dict(events or {})
     marks = sorted({max(1, int(round(f * iterations))) for f in fractions})
@@ -245,5 +351,6 @@ def train_with_snapshots(
             t = time.perf_counter()
             mesh = trainer.extract_mesh(mesh_resolution)
             mesh_s = time.perf_counter() - t
-            snaps.append(Snapshot(stop / iterations, trainer.step_count - it0, start_seconds + train_s + event_s + mesh_s, mesh=mesh))
+            snaps.append(Snapshot(stop / iterations, trainer.step_count - it0, start_seconds + train_s + event_s + mesh_s, mesh=mesh,
+                                  diagnostics=trainer.diagnostics(mesh)))
     return snaps, train_s, mesh_s

@@ -151,6 +151,23 @@ def test_claims(spec: TableSpec, results: Path) -> None:
     assert "**HELD**" in md and "**NOT HELD**" in md and "**UNDECIDED" in md
 
 
+@pytest.mark.parametrize("margin,verdict", [(0.05, "HELD"), (0.15, "NOT HELD")])
+def test_better_claim_with_a_margin(tmp_path: Path, results: Path, margin: float, verdict: str) -> None:
+    """Full (F ~0.81) beats Base (~0.71) by ~0.10: held with a 0.05 margin, not with 0.15."""
+    obj = json.loads(json.dumps(SPEC))
+    obj["claims"] = [{"id": "m", "text": "Full beats Base by a margin", "kind": "better", "group": "scannet",
+                      "metric": "fscore", "row_a": "Full", "row_b": "Base", "margin": margin}]
+    p = tmp_path / "abl.yaml"
+    p.write_text(yaml.safe_dump(obj))
+    rep = build_table(load_table_spec(p), collect_results(results), "small", available_methods={"mi"})
+    assert rep.claims[0].verdict == verdict
+    assert "by more than" in rep.claims[0].details[0] and rep.claims[0].paper_verdict == "n/a"
+    obj["claims"][0]["margin"] = -1
+    p.write_text(yaml.safe_dump(obj))
+    with pytest.raises(BenchInputError, match="margin"):
+        load_table_spec(p)
+
+
 def test_greater_claim_on_extra_metrics(tmp_path: Path) -> None:
     obj = json.loads(json.dumps(SPEC))
     obj["datasets"][0]["extra_metrics"] = ["unc_thin", "unc_plane"]

@@ -17,7 +17,7 @@ from methods.monosdf.grid import (
     jacobian_contract_reference,
     make_grid_spec,
 )
-from methods.monosdf.losses import normal_loss, solve_scale_shift, ssi_depth_loss
+from methods.monosdf.losses import normal_loss, smoothness_loss, solve_scale_shift, ssi_depth_loss
 from methods.monosdf.render import composite_weights, sample_pdf
 from methods.registry import method_config
 
@@ -78,9 +78,9 @@ def test_reference_jacobian_matches_finite_differences():
 
 
 # ----------------------------------------------------------------------------- field gradient vs autograd
-@pytest.mark.parametrize("fast", [True, False])
-def test_explicit_sdf_gradient_matches_autograd(fast):
-    net = SDFNetwork(_spec(), hidden=32, layers=2, geo_features=4, radius=1.0, fast_grid=fast, seed=0)
+@pytest.mark.parametrize("fast,pe", [(True, 0), (False, 0), (True, 6), (False, 3)])
+def test_explicit_sdf_gradient_matches_autograd(fast, pe):
+    net = SDFNetwork(_spec(), hidden=32, layers=2, geo_features=4, radius=1.0, fast_grid=fast, seed=0, pe_frequencies=pe)
     with torch.no_grad():
         net.grid.table.normal_(0, 0.3)
         for lin in net.linears:
@@ -90,8 +90,9 @@ def test_explicit_sdf_gradient_matches_autograd(fast):
     torch.testing.assert_close(grad, sdf_gradient_autograd(net, x), atol=1e-3, rtol=1e-3)
 
 
-def test_geometric_init_is_a_sphere_and_clamp_holds():
-    net = SDFNetwork(_spec(), hidden=64, layers=2, geo_features=4, radius=1.0, init_radius=0.6, inside_out=True)
+@pytest.mark.parametrize("pe", [0, 6])
+def test_geometric_init_is_a_sphere_and_clamp_holds(pe):
+    net = SDFNetwork(_spec(), hidden=64, layers=2, geo_features=4, radius=1.0, init_radius=0.6, inside_out=True, pe_frequencies=pe)
     x = torch.nn.functional.normalize(torch.randn(200, 3), dim=-1) * 0.3
     sdf, _, grad = net(x)
     vals = sdf.detach().numpy()  # inside-out: positive inside; with 64-wide layers IDR's init is a sphere only roughly
@@ -214,3 +215,61 @@ def test_fit_produces_world_mesh_snapshots(tiny_scene):
     # world metres: the mesh lies within the bounding sphere of the scene (a few metres), not the unit cube
     assert np.linalg.norm(mesh.vertices - centre, axis=1).max() < 1.2 * np.linalg.norm(hi - lo)
     assert np.ptp(mesh.vertices, axis=0).max() > 1.5
+
+
+def test_smoothness_loss_zero_for_parallel_normals_and_finite_for_zero_gradients():
+    g = torch.randn(40, 3)
+    assert float(smoothness_loss(g, 3.0 * g)) < 1e-4  # same directions, any length
+    z = torch.zeros(10, 3, requires_grad=True)
+    loss = smoothness_loss(z, torch.randn(10, 3))
+    loss.backward()
+    assert torch.isfinite(loss) and torch.isfinite(z.grad).all()
+    assert abs(float(smoothness_loss(g, -g)) - 2.0) < 1e-3  # opposite normals: |n1 - n2| = 2
+
+
+def test_appearance_codes_are_per_image_and_trained(tiny_scene):
+    """appearance_dim > 0: one code per training image, the colour depends on it, and a step moves only
+    the code of the image it rendered (MonoSDF's per_image_code)."""
+    tr = _trainer(tiny_scene, appearance_dim=8, pe_frequencies=6, smooth_weight=0.005, eikonal_ray_sample="random")
+    assert tuple(tr.color.codes.shape) == (len(tr.views), 8)
+    before = tr.color.codes.detach().clone()
+    logs = tr.step(view=2)
+    assert all(np.isfinite(v) for v in logs.values()) and "smooth" in logs
+    moved = (tr.color.codes.detach() - before).abs().sum(-1) > 0
+    assert moved[2] and int(moved.sum()) == 1
+    with torch.no_grad():
+        tr.color.codes[0] = 1.0
+        tr.color.codes[1] = -1.0
+        px = torch.arange(16)
+        a, b = tr.render_pixels(0, px, jitter=False).rgb, tr.render_pixels(1, px, jitter=False).rgb
+    assert torch.isfinite(a).all() and not torch.allclose(a, b)
+
+
+def test_diagnostics_report_depth_error_and_mesh_agreement(tiny_scene):
+    tr = _trainer(tiny_scene, diag_views=2, diag_stride=4)
+    for _ in range(3):
+        tr.step()
+    d = tr.diagnostics(tr.extract_mesh(32))
+    assert {"beta", "loss_color", "loss_eikonal", "depth_err_median", "mesh_ahead_frac"} <= set(d)
+    assert all(np.isfinite(v) for v in d.values())
+    assert 0.0 <= d["mesh_ahead_frac"] <= 1.0 and d["depth_err_median"] >= 0.0
+    assert "loss_color" not in tr.diagnostics()  # averages reset at each call
+
+
+def test_multi_image_batches_fit_depth_per_image(tiny_scene):
+    """images_per_batch = 3: the rays come from 3 images (their 3 codes move), the step is finite, and
+    the depth term is the mean of three per-image scale-and-shift fits: a prior that is a different
+    affine map of the rendered depth in each image costs ~0, which one joint fit could not do."""
+    tr = _trainer(tiny_scene, appearance_dim=4, images_per_batch=3, rays_per_batch=96)
+    before = tr.color.codes.detach().clone()
+    logs = tr.step()
+    assert all(np.isfinite(v) for v in logs.values())
+    assert int(((tr.color.codes.detach() - before).abs().sum(-1) > 0).sum()) == 3
+    with torch.no_grad():
+        depth = torch.stack([tr.render_pixels(v, torch.arange(32), jitter=False).depth for v in range(len(tr.views))])
+    tr.prior_depth = torch.zeros_like(tr.prior_depth)
+    for v in range(len(tr.views)):
+        tr.prior_depth[v, :32] = depth[v] * (1.0 + v) + 0.1 * v
+    tr.pixel_sampler = lambda v, n, g: torch.arange(n)
+    logs = tr.step()
+    assert logs["depth"] < 1e-3

@@ -1,0 +1,245 @@
+"""Convergence study: one method config on one scene over seeds, with dense snapshots along the schedule.
+
+``bench study convergence METHOD SCENE`` answers "how many iterations does my method need": every run
+(sweep value x seed) trains with ``--snapshots`` evenly spaced snapshots and records, per snapshot, the
+scene protocol's metrics (F-score, accuracy, completion, ...), the method's own diagnostics (MonoSDF:
+beta, every loss term averaged since the previous snapshot, the median rendered-depth error against GT
+on training views) and the seconds spent. ``--exact-priors`` replaces the scene's monocular priors by its
+GT depth and GT normals (the ceiling the priors allow). ``--sweep KEY=V1,V2,...`` repeats the study for
+each value of one config key. Writes ``study.csv`` (tidy: one line per run x snapshot),
+``study.png`` (curves, mean over seeds, one colour per value) and ``study.md`` (final values and the
+convergence checks of the issue tracker's criteria: F at 50 % within ``flat_tol`` of F at 100 %, no
+snapshot after 25 % more than ``drop_tol`` below the one before).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import json
+import math
+import multiprocessing as mp
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import pandas as pd
+import yaml
+
+from bench.atomic import atomic_write_bytes, atomic_write_text
+from bench.errors import BenchInputError
+
+PROTOCOL_OF_FORMAT = {"scannet": "scannet", "replica": "replica", "dtu": "dtu", "llff": "llff"}
+
+
+@dataclasses.dataclass(frozen=True)
+class StudyRun:
+    """One training run of a study: the method, its config overrides (incl. the swept value), the scene
+    (a recipe name or a dataset folder), the seed and the scale."""
+
+    method: str
+    scene: str
+    scale: str
+    seed: int
+    overrides: dict[str, Any]
+    exact_priors: bool
+    sweep_value: Any = None
+
+
+def parse_value(text: str) -> Any:
+    """A config value from the command line, parsed as YAML (``0.5`` -> float, ``true`` -> bool, ``[1, 2]``);
+    ``1e-3``, which YAML 1.1 reads as a string, is a float too."""
+    value = yaml.safe_load(text)
+    if isinstance(value, str):
+        try:
+            return float(value)
+        except ValueError:
+            return value
+    return value
+
+
+def parse_sweep(text: str | None) -> tuple[str | None, list[Any]]:
+    """``KEY=V1,V2,...`` -> (key, [values]); None -> (None, [None])."""
+    if not text:
+        return None, [None]
+    if "=" not in text:
+        raise BenchInputError("--sweep", f"expected KEY=V1,V2,..., got {text!r}")
+    key, vals = text.split("=", 1)
+    values = [parse_value(v) for v in vals.split(",") if v.strip()]
+    if not values:
+        raise BenchInputError("--sweep", f"no values for {key!r}")
+    return key.strip(), values
+
+
+def load_study_scene(scene: str, scale: str, exact_priors: bool) -> Any:
+    """The scene of a study: a recipe name (synthesised and cached) or a dataset folder; with
+    ``exact_priors`` its mono depth / normals are replaced by GT depth / GT normals (camera frame)."""
+    from bench.datasets import load_dataset
+    from bench.formats import load_scene
+
+    sc = load_scene(Path(scene)) if Path(scene).is_dir() else load_dataset(scene, scale)
+    if exact_priors:
+        if sc.gt_depth is None or sc.gt_normal is None:
+            raise BenchInputError(sc.root or scene, "--exact-priors needs GT depth and GT normals in the dataset")
+        sc = dataclasses.replace(sc, mono_depth=sc.gt_depth.copy(), mono_normal=sc.gt_normal.copy())
+    return sc
+
+
+def run_one(run: StudyRun, snapshots: int) -> list[dict[str, Any]]:
+    """Train ``run`` with ``snapshots`` evenly spaced snapshots and evaluate each -> one record per snapshot."""
+    from bench.evaluate import evaluate_snapshot
+    from methods.registry import get_method, method_config
+
+    scene = load_study_scene(run.scene, run.scale, run.exact_priors)
+    protocol = PROTOCOL_OF_FORMAT.get(scene.source_format, "scannet")
+    fractions = [round((i + 1) / snapshots, 6) for i in range(snapshots)]
+    overrides = {"fractions": fractions, **run.overrides}
+    cfg = method_config(run.method, run.scale, overrides)
+    if "diag_views" in cfg and not int(cfg["diag_views"]):
+        cfg["diag_views"] = 4
+    t0 = time.perf_counter()
+    artifacts = get_method(run.method).fit(scene, cfg, run.seed)
+    fit_s = time.perf_counter() - t0
+    records = []
+    for snap in artifacts.snapshots:
+        rec: dict[str, Any] = {"value": json.dumps(run.sweep_value), "seed": run.seed, "fraction": snap.fraction,
+                               "iterations": snap.iterations, "seconds": snap.seconds, "fit_seconds": fit_s}
+        try:
+            rec.update(evaluate_snapshot(snap, scene, protocol, run.scale, seed=run.seed))
+        except ValueError as exc:  # an empty mesh: the point has no metrics
+            rec["error"] = str(exc)
+        rec.update({k: v for k, v in snap.diagnostics.items() if isinstance(v, (int, float))})
+        records.append(rec)
+    return records
+
+
+def _worker_init() -> None:
+    from bench.executors.base import set_job_threads
+
+    set_job_threads(1)
+
+
+def _run_in_worker(run: StudyRun, snapshots: int) -> list[dict[str, Any]]:
+    return run_one(run, snapshots)
+
+
+def convergence_checks(curve: pd.DataFrame, flat_tol: float = 0.03, drop_tol: float = 0.05) -> dict[str, Any]:
+    """The issue tracker's convergence criteria on one run's F-score curve (sorted by fraction):
+    ``flat``: |F(50 %) - F(100 %)| <= flat_tol (F at the snapshot nearest 50 %); ``no_drop``: no snapshot
+    after 25 % is more than drop_tol below the one before."""
+    c = curve.sort_values("fraction")
+    f = c["fscore"].to_numpy(dtype=float) if "fscore" in c else np.full(len(c), np.nan)
+    fr = c["fraction"].to_numpy(dtype=float)
+    if not len(f) or not np.isfinite(f[-1]):
+        return {"flat": False, "no_drop": False, "f_half": math.nan, "max_drop": math.nan}
+    half = f[int(np.argmin(np.abs(fr - 0.5)))]
+    after = np.where(fr > 0.25 + 1e-9)[0]
+    drops = [f[i - 1] - f[i] for i in after if i > 0 and np.isfinite(f[i - 1]) and np.isfinite(f[i])]
+    max_drop = max([0.0, *drops])
+    return {"flat": bool(abs(half - f[-1]) <= flat_tol), "no_drop": bool(max_drop <= drop_tol), "f_half": float(half), "max_drop": float(max_drop)}
+
+
+def summarise(df: pd.DataFrame, key: str | None) -> str:
+    """Markdown: per sweep value, final metrics mean ± std over seeds and the convergence checks."""
+    lines = [f"| {key or 'config'} | seeds | F final | F std | F at 50 % | Acc | Comp | depth err (m) | beta | flat (all seeds) | no drop (all seeds) | s / run |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for value, g in df.groupby("value", sort=False):
+        finals, checks = [], []
+        for _, run in g.groupby("seed"):
+            run = run.sort_values("fraction")
+            finals.append(run.iloc[-1])
+            checks.append(convergence_checks(run))
+        fin = pd.DataFrame(finals)
+
+        def ms(col: str, fmt: str = ".3f") -> str:
+            if col not in fin or fin[col].isna().all():
+                return "-"
+            return f"{fin[col].mean():{fmt}}"
+
+        f_std = f"{fin['fscore'].std(ddof=0):.3f}" if "fscore" in fin else "-"
+        half = np.nanmean([c["f_half"] for c in checks])
+        lines.append(f"| {value} | {len(fin)} | {ms('fscore')} | {f_std} | {half:.3f} | {ms('acc')} | {ms('comp')} | {ms('depth_err_median', '.4f')} "
+                     f"| {ms('beta', '.4f')} | {all(c['flat'] for c in checks)} | {all(c['no_drop'] for c in checks)} | {ms('fit_seconds', '.0f')} |")
+    return "\n".join(lines) + "\n"
+
+
+PLOT_PANELS = (("fscore", "F-score"), ("acc", "Acc (m)"), ("comp", "Comp (m)"), ("depth_err_median", "median |depth - GT| (m)"),
+               ("beta", "beta"), ("loss_color", "colour loss"))
+
+
+def plot_study(df: pd.DataFrame, title: str) -> bytes:
+    """PNG: one panel per quantity against iterations; per sweep value the mean over seeds (thick) and
+    each seed (thin)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    panels = [(c, lab) for c, lab in PLOT_PANELS if c in df and df[c].notna().any()]
+    fig = Figure(figsize=(4.2 * len(panels), 3.6))
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(1, len(panels), squeeze=False)[0]
+    colours = {v: f"C{i % 10}" for i, v in enumerate(dict.fromkeys(df["value"]))}
+    for ax, (col, lab) in zip(axes, panels):
+        for value, g in df.groupby("value", sort=False):
+            for _, run in g.groupby("seed"):
+                run = run.sort_values("iterations")
+                ax.plot(run["iterations"], run[col], color=colours[value], lw=0.6, alpha=0.5)
+            mean = g.groupby("iterations")[col].mean()
+            ax.plot(mean.index, mean.values, color=colours[value], lw=2, marker="o", ms=3, label=str(value))
+        ax.set_xlabel("iterations")
+        ax.set_title(lab, fontsize=9)
+        if col in ("depth_err_median", "beta"):
+            ax.set_yscale("log")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7, title="value", title_fontsize=7)
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)
+    return buf.getvalue()
+
+
+def run_study(method: str, scene: str, scale: str, seeds: list[int], overrides: dict[str, Any], sweep: str | None,
+              exact_priors: bool, snapshots: int, out_dir: Path, workers: int | None = None,
+              log: Callable[[str], None] = print) -> pd.DataFrame:
+    """Run every (sweep value x seed), write study.csv / study.png / study.md into ``out_dir``; returns the records."""
+    from methods.registry import method_config
+
+    if snapshots < 2:
+        raise BenchInputError("--snapshots", f"need at least 2 snapshots, got {snapshots}")
+    key, values = parse_sweep(sweep)
+    method_config(method, scale, {**overrides, **({key: values[0]} if key else {})})  # unknown keys: one clear error, before any work
+    load_study_scene(scene, scale, exact_priors)  # bad scene: fail now (and synthesise it once, before the workers)
+    runs = [StudyRun(method, scene, scale, int(s), {**overrides, **({key: v} if key else {})}, exact_priors, v) for v in values for s in seeds]
+    workers = max(1, min(workers or os.cpu_count() or 1, len(runs)))
+    log(f"[study] {method} on {scene} ({scale}{', exact priors' if exact_priors else ''}): {len(runs)} runs "
+        f"({len(values)} value(s) x {len(seeds)} seed(s)), {snapshots} snapshots each, {workers} worker(s)")
+    records: list[dict[str, Any]] = []
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("forkserver"), initializer=_worker_init) as pool:
+        futures = {pool.submit(_run_in_worker, r, snapshots): r for r in runs}
+        for fut in as_completed(futures):
+            r = futures[fut]
+            recs = fut.result()
+            records.extend(recs)
+            last = recs[-1]
+            f_str = ", ".join(f"{x.get('fscore', float('nan')):.3f}" for x in recs)
+            log(f"[study] {key}={r.sweep_value} seed {r.seed}: F along the schedule {f_str}; "
+                f"depth err {last.get('depth_err_median', float('nan')):.4f} m; {last['fit_seconds']:.0f} s "
+                f"({time.perf_counter() - t0:.0f} s elapsed)")
+    df = pd.DataFrame(records)
+    order = {json.dumps(v): i for i, v in enumerate(values)}
+    df = df.sort_values(by=["value", "seed", "fraction"], key=lambda c: c.map(order) if c.name == "value" else c).reset_index(drop=True)
+    df.insert(0, "sweep_key", key or "")
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out_dir / "study.csv", df.to_csv(index=False))
+    title = f"{method} on {scene} ({scale}){' exact priors' if exact_priors else ''}; {overrides or ''}"
+    atomic_write_bytes(out_dir / "study.png", plot_study(df, title))
+    md = (f"# Convergence study: {title}\n\nseeds {seeds}; {snapshots} snapshots; sweep {key or '-'} over {values}\n\n"
+          + summarise(df, key) + "\n![curves](study.png)\n")
+    atomic_write_text(out_dir / "study.md", md)
+    log(md)
+    return df

@@ -1,0 +1,48 @@
+"""`bench study convergence`: dense snapshots along the schedule, exact priors, a sweep, CSV / plot / summary."""
+
+from __future__ import annotations
+
+import pandas as pd
+import pytest
+
+from bench.cli import main
+from bench.study import convergence_checks, parse_sweep
+
+
+def test_convergence_checks_follow_the_issue_criteria():
+    flat = pd.DataFrame({"fraction": [0.25, 0.5, 0.75, 1.0], "fscore": [0.5, 0.80, 0.81, 0.82]})
+    assert convergence_checks(flat) == {"flat": True, "no_drop": True, "f_half": 0.80, "max_drop": pytest.approx(0.0)}
+    climbing = pd.DataFrame({"fraction": [0.25, 0.5, 0.75, 1.0], "fscore": [0.5, 0.6, 0.7, 0.8]})
+    assert not convergence_checks(climbing)["flat"]
+    swinging = pd.DataFrame({"fraction": [0.25, 0.5, 0.75, 1.0], "fscore": [0.7, 0.8, 0.7, 0.8]})
+    c = convergence_checks(swinging)
+    assert c["flat"] and not c["no_drop"] and c["max_drop"] == pytest.approx(0.1)
+
+
+def test_parse_sweep():
+    assert parse_sweep("lr=1e-3,2e-3") == ("lr", [1e-3, 2e-3])
+    assert parse_sweep("inside_out=true,false")[1] == [True, False]
+    assert parse_sweep(None) == (None, [None])
+
+
+def test_study_cli_writes_curves_with_diagnostics(tmp_path):
+    out = tmp_path / "study"
+    rc = main(["study", "convergence", "monosdf", "scannet_like_tiny", "--scale", "tiny", "--seeds", "0", "--snapshots", "2",
+               "--exact-priors", "--workers", "1", "--set", "iterations=8", "rays_per_batch=64", "mesh_resolution=32",
+               "--sweep", "appearance_dim=0,8", "--out", str(out)])
+    assert rc == 0
+    df = pd.read_csv(out / "study.csv", dtype={"value": str})
+    assert len(df) == 4 and set(df["value"]) == {"0", "8"}
+    assert {"fscore", "acc", "comp", "beta", "loss_color", "depth_err_median", "iterations", "seconds"} <= set(df.columns)
+    assert list(df["iterations"][:2]) == [4, 8]
+    assert (out / "study.png").stat().st_size > 1000
+    md = (out / "study.md").read_text()
+    assert "appearance_dim" in md and "flat" in md
+
+
+def test_study_bad_key_is_one_clear_error(tmp_path, capsys):
+    rc = main(["study", "convergence", "monosdf", "scannet_like_tiny", "--scale", "tiny", "--seeds", "0",
+               "--sweep", "no_such_key=1,2", "--out", str(tmp_path / "x")])
+    assert rc == 2
+    assert "no_such_key" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
