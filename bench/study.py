@@ -218,7 +218,11 @@ def run_study(method: str, scene: str, scale: str, seeds: list[int], overrides: 
         f"({len(values)} value(s) x {len(seeds)} seed(s)), {snapshots} snapshots each, {workers} worker(s)")
     records: list[dict[str, Any]] = []
     t0 = time.perf_counter()
-    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("forkserver"), initializer=_worker_init) as pool:
+    title = f"{method} on {scene} ({scale}){' exact priors' if exact_priors else ''}; {overrides or ''}"
+    out_dir = Path(out_dir)
+    df = pd.DataFrame()
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("forkserver"), initializer=_worker_init)
+    try:
         futures = {pool.submit(_run_in_worker, r, snapshots): r for r in runs}
         for fut in as_completed(futures):
             r = futures[fut]
@@ -227,19 +231,30 @@ def run_study(method: str, scene: str, scale: str, seeds: list[int], overrides: 
             last = recs[-1]
             f_str = ", ".join(f"{x.get('fscore', float('nan')):.3f}" for x in recs)
             log(f"[study] {key}={r.sweep_value} seed {r.seed}: F along the schedule {f_str}; "
-                f"depth err {last.get('depth_err_median', float('nan')):.4f} m; {last['fit_seconds']:.0f} s "
-                f"({time.perf_counter() - t0:.0f} s elapsed)")
+                f"depth err {last.get('depth_err_median', float('nan')):.4f} m; beta {last.get('beta', float('nan')):.4f}; "
+                f"{last['fit_seconds']:.0f} s ({time.perf_counter() - t0:.0f} s elapsed)")
+            df = _write_outputs(records, values, key, out_dir, title, seeds, snapshots)  # after every run: a partial study is readable
+    except BaseException:  # Ctrl-C / SIGTERM / a failed run: stop the running workers too, not only the queue
+        for proc in list(getattr(pool, "_processes", {}).values()):
+            proc.terminate()
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown()
+    log((out_dir / "study.md").read_text())
+    return df
+
+
+def _write_outputs(records: list[dict[str, Any]], values: list[Any], key: str | None, out_dir: Path, title: str,
+                   seeds: list[int], snapshots: int) -> pd.DataFrame:
+    """study.csv / study.png / study.md from the runs finished so far (each written atomically)."""
     df = pd.DataFrame(records)
     order = {json.dumps(v): i for i, v in enumerate(values)}
     df = df.sort_values(by=["value", "seed", "fraction"], key=lambda c: c.map(order) if c.name == "value" else c).reset_index(drop=True)
     df.insert(0, "sweep_key", key or "")
-    out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out_dir / "study.csv", df.to_csv(index=False))
-    title = f"{method} on {scene} ({scale}){' exact priors' if exact_priors else ''}; {overrides or ''}"
     atomic_write_bytes(out_dir / "study.png", plot_study(df, title))
     md = (f"# Convergence study: {title}\n\nseeds {seeds}; {snapshots} snapshots; sweep {key or '-'} over {values}\n\n"
           + summarise(df, key) + "\n![curves](study.png)\n")
     atomic_write_text(out_dir / "study.md", md)
-    log(md)
     return df

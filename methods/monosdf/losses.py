@@ -54,21 +54,36 @@ def solve_scale_shift(pred: torch.Tensor, target: torch.Tensor, weight: torch.Te
     return scale, shift
 
 
-def ssi_depth_loss(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
-    """Scale-and-shift-invariant depth loss (MonoSDF): align the rendered depth to the prior in closed
-    form, then the weighted mean squared residual in prior units.
+def ssi_depth_fit(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor,
+                  negative_scale: str = "keep") -> tuple[torch.Tensor, torch.Tensor]:
+    """Scale-and-shift-invariant depth loss (MonoSDF) and its fitted scale: align the rendered depth to
+    the prior in closed form, then the weighted mean squared residual in prior units.
 
     Args:
         pred: (R,) rendered z-depth; target: (R,) monocular prior (0 = invalid); weight: (R,) per-ray
             weights in [0, 1] (1 for MonoSDF; MonoInstance's certainty 1 - U), zeroed where invalid.
+        negative_scale: ``"keep"`` (MonoSDF) or ``"drop"``: a fit with scale <= 0 (the rendered depth
+            anti-correlated with the prior, e.g. the initial sphere early in training) gives loss 0 for
+            this batch, instead of a gradient that pushes the depth towards the mirrored (negative-scale)
+            solution, which the scale-and-shift-invariant loss rates as good as the right one.
 
     Returns:
-        scalar loss (0 when no ray is valid).
+        (scalar loss (0 when no ray is valid), the fitted scale (detached)).
     """
     w = weight * (target > 0).to(weight.dtype)
     s, t = solve_scale_shift(pred, target, w)
     res = s * pred + t - target
-    return (w * res * res).sum() / w.sum().clamp_min(1.0)
+    loss = (w * res * res).sum() / w.sum().clamp_min(1.0)
+    if negative_scale == "drop":
+        loss = torch.where(s > 0, loss, torch.zeros_like(loss))
+    elif negative_scale != "keep":
+        raise ValueError(f"negative_scale must be 'keep' or 'drop', got {negative_scale!r}")
+    return loss, s.detach()
+
+
+def ssi_depth_loss(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
+    """:func:`ssi_depth_fit`'s loss with MonoSDF's behaviour (every fitted scale kept)."""
+    return ssi_depth_fit(pred, target, weight)[0]
 
 
 def normal_loss(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

@@ -26,7 +26,7 @@ from bench.scene import Scene
 from methods.base import Snapshot
 from methods.monosdf.field import ColorNetwork, LaplaceDensity, SDFNetwork
 from methods.monosdf.grid import make_grid_spec
-from methods.monosdf.losses import color_loss, eikonal_loss, normal_loss, smoothness_loss, ssi_depth_loss
+from methods.monosdf.losses import color_loss, eikonal_loss, normal_loss, smoothness_loss, ssi_depth_fit
 from methods.monosdf.rays import build_rays, normalisation
 from methods.monosdf.render import RenderOutput, hierarchical_samples, render_depth, render_rays
 
@@ -70,14 +70,18 @@ class MonoSDFTrainer:
         self.density = LaplaceDensity(cfg["beta_init"], cfg["beta_min"])
         lr = float(cfg["lr"])
         mlp_params = [p for n, p in self.sdf.named_parameters() if not n.startswith("grid.")]
+        # three groups as MonoSDF's optimiser (encoding x grid_lr_factor, networks, density); the density
+        # (beta) group at lr x beta_lr_factor (MonoSDF: 1)
         self.optim = torch.optim.Adam([
             {"params": [self.sdf.grid.table], "lr": lr * cfg["grid_lr_factor"]},
-            {"params": mlp_params + list(self.color.parameters()) + list(self.density.parameters()), "lr": lr},
+            {"params": mlp_params + list(self.color.parameters()), "lr": lr},
+            {"params": list(self.density.parameters()), "lr": lr * float(cfg.get("beta_lr_factor", 1.0))},
         ], betas=(0.9, 0.99), eps=1e-15, fused=True)
         self.base_lrs = [g["lr"] for g in self.optim.param_groups]
         self.step_count = 0
         self._log_sums: dict[str, float] = {}
         self._log_count = 0
+        self._depth_scales: list[float] = []  # fitted depth scales since the last diagnostics()
 
     def _prior(self, arr: np.ndarray | None, shape: tuple[int, ...]) -> torch.Tensor | None:
         if arr is None:
@@ -95,6 +99,14 @@ class MonoSDFTrainer:
                            r.far[view, pixels], r.world_to_cam_rot[view], self.cfg["near"], self.cfg["n_coarse"], self.cfg["n_fine"],
                            self.gen, jitter, extra_points=extra_points, t=t, image=view)
 
+    def _set_levels(self) -> None:
+        """Coarse-to-fine grid (``grid_levels_initial`` < ``grid_levels``): start with that many levels and
+        add one every ``grid_level_every`` (a fraction of the schedule)."""
+        n0 = int(self.cfg.get("grid_levels_initial") or self.cfg["grid_levels"])
+        every = float(self.cfg.get("grid_level_every", 0.05))
+        frac = self.step_count / max(int(self.cfg["iterations"]), 1)
+        self.sdf.set_active_levels(n0 + (int(frac / every) if every > 0 else self.cfg["grid_levels"]))
+
     def _set_lr(self) -> None:
         frac = min(self.step_count / max(int(self.cfg["iterations"]), 1), 1.0)
         decay = float(self.cfg["lr_decay"]) ** frac
@@ -109,7 +121,9 @@ class MonoSDFTrainer:
         terms: dict[str, tuple[float, torch.Tensor]] = {}
         w = self.prior_weight[view, pixels]
         if self.prior_depth is not None and cfg["depth_weight"] > 0:
-            terms["depth"] = (float(cfg["depth_weight"]), ssi_depth_loss(out.depth, self.prior_depth[view, pixels], w))
+            loss, scale = ssi_depth_fit(out.depth, self.prior_depth[view, pixels], w, str(cfg.get("depth_negative_scale", "keep")))
+            terms["depth"] = (float(cfg["depth_weight"]), loss)
+            self._depth_scales.append(float(scale))
         if self.prior_normal is not None and cfg["normal_weight"] > 0:
             l1, ang = normal_loss(out.normal, self.prior_normal[view, pixels], w)
             terms["normal_l1"] = (float(cfg["normal_weight"]), l1)
@@ -126,6 +140,7 @@ class MonoSDFTrainer:
         terms are means over all rays; the per-image terms (:meth:`_per_image_terms`) are computed per
         image and averaged over the images."""
         cfg = self.cfg
+        self._set_levels()
         k = max(1, int(cfg.get("images_per_batch", 1)))
         if view is not None:
             views = [int(view)]
@@ -201,20 +216,26 @@ class MonoSDFTrainer:
 
     def diagnostics(self, mesh: trimesh.Trimesh | None = None) -> dict[str, float]:
         """Numbers for the convergence study at a snapshot: ``beta``; ``loss_<term>``, each loss term
-        averaged over the steps since the previous call (then reset); with ``diag_views`` > 0 and GT depth,
+        averaged over the steps since the previous call (then reset); ``depth_neg_scale_frac``, the fraction
+        of the per-image depth fits since then whose scale was <= 0 (rendered depth anti-correlated with the
+        prior); with ``diag_views`` > 0 and GT depth,
         ``depth_err_median`` / ``depth_err_p90``: median / 90th percentile of |rendered z-depth - GT| (m)
         over that many evenly spaced training views at every ``diag_stride``-th pixel where GT > 0; with a
         ``mesh`` (world metres) also ``mesh_depth_err_median`` (the mesh ray-cast at the same pixels
         against GT) and ``mesh_ahead_frac``: the fraction of those pixels where the mesh surface lies more
-        than 10 cm in front of the volume-rendered depth (surfaces the rendering does not weigh)."""
+        than 10 cm in front of the volume-rendered depth (surfaces the rendering does not weigh);
+        ``sampler_gap_median`` / ``sampler_gap_p90``: |depth with the training sampler - depth with 8x the
+        coarse samples| (m), how far the sampler's depth is from what a dense sampling of the same field gives."""
         out = {"beta": float(self.density.beta().detach())}
         n = max(self._log_count, 1)
         out.update({f"loss_{k}": v / n for k, v in self._log_sums.items() if k != "beta"})
-        self._log_sums, self._log_count = {}, 0
+        if self._depth_scales:
+            out["depth_neg_scale_frac"] = float(np.mean(np.asarray(self._depth_scales) <= 0))
+        self._log_sums, self._log_count, self._depth_scales = {}, 0, []
         k = int(self.cfg.get("diag_views", 0))
         if k > 0 and self.scene.gt_depth is not None:
             stride = int(self.cfg.get("diag_stride", 2))
-            errs, mesh_errs, ahead = [], [], []
+            errs, mesh_errs, ahead, gaps = [], [], [], []
             slots = np.unique(np.linspace(0, len(self.views) - 1, k).round().astype(int))
             mesh_depth = None
             if mesh is not None and len(mesh.faces):
@@ -226,6 +247,8 @@ class MonoSDFTrainer:
                 gt = self.scene.gt_depth[self.views[slot]][::stride, ::stride]
                 pred = self.render_view_depth(int(slot), stride=stride)
                 errs.append(np.abs(pred - gt)[gt > 0])
+                dense = self.render_view_depth(int(slot), stride=stride, n_coarse=8 * int(self.cfg["n_coarse"]))
+                gaps.append(np.abs(pred - dense)[gt > 0])
                 if mesh_depth is not None:
                     md = mesh_depth[i][::stride, ::stride]
                     hit = (gt > 0) & (md > 0)
@@ -235,6 +258,9 @@ class MonoSDFTrainer:
             if len(e):
                 out["depth_err_median"] = float(np.median(e))
                 out["depth_err_p90"] = float(np.percentile(e, 90))
+                g = np.concatenate(gaps)
+                out["sampler_gap_median"] = float(np.median(g))
+                out["sampler_gap_p90"] = float(np.percentile(g, 90))
             if mesh_errs and len(np.concatenate(mesh_errs)):
                 out["mesh_depth_err_median"] = float(np.median(np.concatenate(mesh_errs)))
                 out["mesh_ahead_frac"] = float(np.concatenate(ahead).mean())
@@ -271,8 +297,9 @@ class MonoSDFTrainer:
         return trimesh.Trimesh(verts * scale + centre, faces[:, ::-1].copy(), process=False)
 
     @torch.no_grad()
-    def render_view_depth(self, view: int, stride: int = 1, chunk: int = 4096) -> np.ndarray:
-        """z-depth in metres of training slot ``view`` at every ``stride``-th pixel -> (ceil(H/stride), ceil(W/stride))."""
+    def render_view_depth(self, view: int, stride: int = 1, chunk: int = 4096, n_coarse: int | None = None) -> np.ndarray:
+        """z-depth in metres of training slot ``view`` at every ``stride``-th pixel -> (ceil(H/stride), ceil(W/stride));
+        ``n_coarse`` overrides the sampler's coarse samples (a denser reference for the diagnostics)."""
         H, W = self.scene.height, self.scene.width
         rows, cols = np.arange(0, H, stride), np.arange(0, W, stride)
         pix = torch.from_numpy((rows[:, None] * W + cols[None, :]).reshape(-1))
@@ -280,7 +307,7 @@ class MonoSDFTrainer:
         for s in range(0, len(pix), chunk):
             p = pix[s : s + chunk]
             depth.append(render_depth(self.sdf, self.density, r.origins[view], r.dirs[view, p], r.z_factor[view, p], r.far[view, p],
-                                      self.cfg["near"], self.cfg["n_coarse"], self.cfg["n_fine"]))
+                                      self.cfg["near"], int(n_coarse or self.cfg["n_coarse"]), self.cfg["n_fine"]))
         return (torch.cat(depth) * r.scale).reshape(len(rows), len(cols)).numpy()
 
     # ------------------------------------------------------------------ checkpoints

@@ -78,9 +78,10 @@ def test_reference_jacobian_matches_finite_differences():
 
 
 # ----------------------------------------------------------------------------- field gradient vs autograd
-@pytest.mark.parametrize("fast,pe", [(True, 0), (False, 0), (True, 6), (False, 3)])
-def test_explicit_sdf_gradient_matches_autograd(fast, pe):
+@pytest.mark.parametrize("fast,pe,levels", [(True, 0, 5), (False, 0, 5), (True, 6, 5), (False, 3, 5), (True, 6, 2)])
+def test_explicit_sdf_gradient_matches_autograd(fast, pe, levels):
     net = SDFNetwork(_spec(), hidden=32, layers=2, geo_features=4, radius=1.0, fast_grid=fast, seed=0, pe_frequencies=pe)
+    net.set_active_levels(levels)
     with torch.no_grad():
         net.grid.table.normal_(0, 0.3)
         for lin in net.linears:
@@ -133,6 +134,24 @@ def test_ssi_depth_loss_recovers_affine_and_handles_singular_cases():
         assert torch.isfinite(loss), name
         assert g is None or torch.isfinite(g).all(), name
     assert float(ssi_depth_loss(pred.detach(), torch.zeros(64), torch.ones(64))) == 0.0  # no valid ray: no loss
+
+
+def test_negative_scale_fit_is_dropped_only_when_asked():
+    """A rendered depth anti-correlated with the prior fits with a negative scale: MonoSDF keeps its
+    (mirror-seeking) gradient, ``drop`` gives loss 0 and no gradient; a positive fit is unchanged."""
+    from methods.monosdf.losses import ssi_depth_fit
+
+    pred = torch.linspace(0.2, 1.0, 64, requires_grad=True)
+    target = 2.0 - 1.5 * pred.detach() + 0.05 * torch.sin(20 * pred.detach())
+    keep, s_keep = ssi_depth_fit(pred, target, torch.ones(64), "keep")
+    drop, s_drop = ssi_depth_fit(pred, target, torch.ones(64), "drop")
+    assert float(s_keep) < 0 and float(s_drop) < 0 and float(keep) > 0 and float(drop) == 0.0
+    (g,) = torch.autograd.grad(drop, pred, allow_unused=True)
+    assert g is None or float(g.abs().sum()) == 0.0
+    pos = 0.5 + 1.5 * pred.detach() + 0.05 * torch.sin(20 * pred.detach())
+    assert torch.equal(ssi_depth_fit(pred, pos, torch.ones(64), "drop")[0], ssi_depth_fit(pred, pos, torch.ones(64), "keep")[0])
+    with pytest.raises(ValueError, match="negative_scale"):
+        ssi_depth_fit(pred, pos, torch.ones(64), "clip")
 
 
 def test_normal_loss_with_zero_vectors_is_finite():
@@ -250,7 +269,7 @@ def test_diagnostics_report_depth_error_and_mesh_agreement(tiny_scene):
     for _ in range(3):
         tr.step()
     d = tr.diagnostics(tr.extract_mesh(32))
-    assert {"beta", "loss_color", "loss_eikonal", "depth_err_median", "mesh_ahead_frac"} <= set(d)
+    assert {"beta", "loss_color", "loss_eikonal", "depth_err_median", "mesh_ahead_frac", "sampler_gap_median"} <= set(d)
     assert all(np.isfinite(v) for v in d.values())
     assert 0.0 <= d["mesh_ahead_frac"] <= 1.0 and d["depth_err_median"] >= 0.0
     assert "loss_color" not in tr.diagnostics()  # averages reset at each call
@@ -273,3 +292,17 @@ def test_multi_image_batches_fit_depth_per_image(tiny_scene):
     tr.pixel_sampler = lambda v, n, g: torch.arange(n)
     logs = tr.step()
     assert logs["depth"] < 1e-3
+
+
+def test_coarse_to_fine_levels_switch_on_along_the_schedule(tiny_scene):
+    """grid_levels_initial = 2, one more level every 25 % of the schedule; the inactive levels' table
+    entries receive no gradient."""
+    tr = _trainer(tiny_scene, grid_levels_initial=2, grid_level_every=0.25, iterations=8)
+    spec = tr.sdf.spec
+    tr.step()
+    assert tr.sdf.active_levels == 2
+    g = tr.sdf.grid.table.grad
+    assert g is None or float(g[spec.offsets[2]:].abs().sum()) == 0.0
+    for _ in range(5):
+        tr.step()
+    assert tr.sdf.active_levels == 2 + 2  # step 5 of 8 = 62.5 %: two more levels
