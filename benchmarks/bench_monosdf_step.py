@@ -34,6 +34,7 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--reference-grid", action="store_true", help="pure-PyTorch grid instead of the C++ kernel")
     ap.add_argument("--no-profile", action="store_true")
+    ap.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE", help="config overrides (YAML values), e.g. pe_frequencies=0")
     args = ap.parse_args()
 
     torch.set_num_threads(args.threads)
@@ -41,6 +42,11 @@ def main() -> None:
     overrides = {"fast_grid": not args.reference_grid}
     if args.rays:
         overrides["rays_per_batch"] = args.rays
+    from bench.study import parse_value
+
+    for item in args.set:
+        key, value = item.split("=", 1)
+        overrides[key] = parse_value(value)
     cfg = method_config("monosdf", args.scale, overrides)
     trainer = MonoSDFTrainer(scene, cfg, seed=0)
     samples = cfg["rays_per_batch"] * (cfg["n_coarse"] + cfg["n_fine"])

@@ -123,7 +123,7 @@ class MonoSDFTrainer:
         if self.prior_depth is not None and cfg["depth_weight"] > 0:
             loss, scale = ssi_depth_fit(out.depth, self.prior_depth[view, pixels], w, str(cfg.get("depth_negative_scale", "keep")))
             terms["depth"] = (float(cfg["depth_weight"]), loss)
-            self._depth_scales.append(float(scale))
+            self._depth_scales.append(float(scale))  # prior units per normalised unit (exact metric prior: the scene scale)
         if self.prior_normal is not None and cfg["normal_weight"] > 0:
             l1, ang = normal_loss(out.normal, self.prior_normal[view, pixels], w)
             terms["normal_l1"] = (float(cfg["normal_weight"]), l1)
@@ -218,7 +218,8 @@ class MonoSDFTrainer:
         """Numbers for the convergence study at a snapshot: ``beta``; ``loss_<term>``, each loss term
         averaged over the steps since the previous call (then reset); ``depth_neg_scale_frac``, the fraction
         of the per-image depth fits since then whose scale was <= 0 (rendered depth anti-correlated with the
-        prior); with ``diag_views`` > 0 and GT depth,
+        prior), and ``depth_fit_scale_median``, their median scale (prior units per normalised unit: with an
+        exact metric prior the scene's metres per unit, so another value is a scaled geometry); with ``diag_views`` > 0 and GT depth,
         ``depth_err_median`` / ``depth_err_p90``: median / 90th percentile of |rendered z-depth - GT| (m)
         over that many evenly spaced training views at every ``diag_stride``-th pixel where GT > 0; with a
         ``mesh`` (world metres) also ``mesh_depth_err_median`` (the mesh ray-cast at the same pixels
@@ -231,6 +232,7 @@ class MonoSDFTrainer:
         out.update({f"loss_{k}": v / n for k, v in self._log_sums.items() if k != "beta"})
         if self._depth_scales:
             out["depth_neg_scale_frac"] = float(np.mean(np.asarray(self._depth_scales) <= 0))
+            out["depth_fit_scale_median"] = float(np.median(self._depth_scales))
         self._log_sums, self._log_count, self._depth_scales = {}, 0, []
         k = int(self.cfg.get("diag_views", 0))
         if k > 0 and self.scene.gt_depth is not None:
