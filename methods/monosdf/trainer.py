@@ -165,6 +165,8 @@ class MonoSDFTrainer:
         uni = (torch.rand(R, 3, generator=self.gen) * 2 - 1) * self.radius
         rows = torch.arange(R)
         mode = str(cfg.get("eikonal_ray_sample", "max_weight"))
+        if mode not in ("random", "max_weight"):
+            raise ValueError(f"eikonal_ray_sample must be 'random' or 'max_weight', got {mode!r}")
         smooth_w = float(cfg.get("smooth_weight", 0.0))
         pick = torch.randint(0, t.shape[1], (R,), generator=self.gen) if mode == "random" else None
         extra = [uni]
