@@ -209,14 +209,9 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def cmd_study_convergence(args: argparse.Namespace) -> int:
-    from bench.study import parse_value, run_study
+    from bench.study import parse_overrides, run_study
 
-    overrides = {}
-    for item in args.set or []:
-        if "=" not in item:
-            raise BenchInputError("--set", f"expected KEY=VALUE, got {item!r}")
-        k, v = item.split("=", 1)
-        overrides[k.strip()] = parse_value(v)
+    overrides = parse_overrides(args.set)
     out = Path(args.out) if args.out else DEFAULT_OUT / "studies" / f"{args.method}-{Path(args.scene).name}-{args.scale}"
     run_study(args.method, args.scene, args.scale, list(args.seeds), overrides, args.sweep, args.exact_priors, int(args.snapshots),
               out, workers=args.workers)

@@ -32,9 +32,6 @@ import yaml
 from bench.atomic import atomic_write_bytes, atomic_write_text
 from bench.errors import BenchInputError
 
-PROTOCOL_OF_FORMAT = {"scannet": "scannet", "replica": "replica", "dtu": "dtu", "llff": "llff"}
-
-
 @dataclasses.dataclass(frozen=True)
 class StudyRun:
     """One training run of a study: the method, its config overrides (incl. the swept value), the scene
@@ -59,6 +56,18 @@ def parse_value(text: str) -> Any:
         except ValueError:
             return value
     return value
+
+
+def parse_overrides(items: list[str] | None, flag: str = "--set") -> dict[str, Any]:
+    """``["KEY=VALUE", ...]`` -> ``{key: parsed value}`` (:func:`parse_value`); a malformed item is a
+    BenchInputError naming ``flag``."""
+    out: dict[str, Any] = {}
+    for item in items or []:
+        if "=" not in item:
+            raise BenchInputError(flag, f"expected KEY=VALUE, got {item!r}")
+        key, value = item.split("=", 1)
+        out[key.strip()] = parse_value(value)
+    return out
 
 
 def parse_sweep(text: str | None) -> tuple[str | None, list[Any]]:
@@ -94,7 +103,7 @@ def run_one(run: StudyRun, snapshots: int) -> list[dict[str, Any]]:
     from methods.registry import get_method, method_config
 
     scene = load_study_scene(run.scene, run.scale, run.exact_priors)
-    protocol = PROTOCOL_OF_FORMAT.get(scene.source_format, "scannet")
+    protocol = scene.source_format  # each on-disk format has its protocol of the same name (bench/evaluate.py)
     fractions = [round((i + 1) / snapshots, 6) for i in range(snapshots)]
     overrides = {"fractions": fractions, **run.overrides}
     cfg = method_config(run.method, run.scale, overrides)
@@ -120,10 +129,6 @@ def _worker_init() -> None:
     from bench.executors.base import set_job_threads
 
     set_job_threads(1)
-
-
-def _run_in_worker(run: StudyRun, snapshots: int) -> list[dict[str, Any]]:
-    return run_one(run, snapshots)
 
 
 def convergence_checks(curve: pd.DataFrame, flat_tol: float = 0.03, drop_tol: float = 0.05) -> dict[str, Any]:
@@ -223,7 +228,7 @@ def run_study(method: str, scene: str, scale: str, seeds: list[int], overrides: 
     df = pd.DataFrame()
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("forkserver"), initializer=_worker_init)
     try:
-        futures = {pool.submit(_run_in_worker, r, snapshots): r for r in runs}
+        futures = {pool.submit(run_one, r, snapshots): r for r in runs}
         for fut in as_completed(futures):
             r = futures[fut]
             recs = fut.result()

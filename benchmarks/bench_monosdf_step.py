@@ -42,11 +42,9 @@ def main() -> None:
     overrides = {"fast_grid": not args.reference_grid}
     if args.rays:
         overrides["rays_per_batch"] = args.rays
-    from bench.study import parse_value
+    from bench.study import parse_overrides
 
-    for item in args.set:
-        key, value = item.split("=", 1)
-        overrides[key] = parse_value(value)
+    overrides.update(parse_overrides(args.set))
     cfg = method_config("monosdf", args.scale, overrides)
     trainer = MonoSDFTrainer(scene, cfg, seed=0)
     samples = cfg["rays_per_batch"] * (cfg["n_coarse"] + cfg["n_fine"])

@@ -78,7 +78,6 @@ class SDFNetwork(torch.nn.Module):
         self.grid = FeatureGrid(spec, fast=fast_grid, seed=seed)
         self.radius = float(radius)
         self.pe_frequencies = int(pe_frequencies)
-        self.spec = spec
         self.active_levels = spec.levels  # coarse-to-fine: features of finer levels read as 0 (set_active_levels)
         self.register_buffer("pe_freqs", 2.0 ** torch.arange(self.pe_frequencies, dtype=torch.float32), persistent=False)
         dims = [spec.out_dim + 3 * (1 + 2 * self.pe_frequencies)] + [hidden] * layers + [1 + geo_features]
@@ -88,7 +87,13 @@ class SDFNetwork(torch.nn.Module):
     def set_active_levels(self, n: int) -> None:
         """Use only the ``n`` coarsest grid levels (the others' features and Jacobians read as 0, so their
         table entries get no gradient): progressive level activation (Neuralangelo / instant-angelo)."""
-        self.active_levels = max(0, min(int(n), self.spec.levels))
+        self.active_levels = max(0, min(int(n), self.grid.spec.levels))
+
+    def level_mask(self, feat: torch.Tensor) -> torch.Tensor:
+        """``feat`` (P, L * F) with the features of the inactive (finer) levels set to 0 (level-major layout)."""
+        if self.active_levels >= self.grid.spec.levels:
+            return feat
+        return feat * (torch.arange(feat.shape[-1]) < self.active_levels * self.grid.spec.features).to(feat.dtype)
 
     def encode(self, u: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
         """Positional encoding of ``u = x / R`` (P, 3) -> (PE (P, 3 + 6F) as ``[u, sin(f_k u), cos(f_k u)]``
@@ -141,11 +146,8 @@ class SDFNetwork(torch.nn.Module):
         """
         xs = x / self.radius
         feat, jac = self.grid(xs, with_jacobian=with_gradient)
-        if self.active_levels < self.spec.levels:
-            n_on = self.active_levels * self.spec.features
-            mask = (torch.arange(feat.shape[-1]) < n_on).to(feat.dtype)
-            feat = feat * mask
-            jac = None if jac is None else jac * mask
+        feat = self.level_mask(feat)
+        jac = None if jac is None else self.level_mask(jac)  # (P, 3, L * F): the same mask on the last axis
         pe, sin, cos = self.encode(xs)
         a = torch.cat([feat, pe], dim=-1)
         slopes = []
@@ -181,7 +183,7 @@ def sdf_gradient_autograd(net: SDFNetwork, x: torch.Tensor) -> torch.Tensor:
     x = x.detach().requires_grad_(True)
     xs = x / net.radius
     feat, _ = interpolate_reference(net.grid.table, xs, net.grid.spec, with_jacobian=False)
-    feat = feat * (torch.arange(feat.shape[-1]) < net.active_levels * net.spec.features).to(feat.dtype)
+    feat = net.level_mask(feat)
     a = torch.cat([feat, net.encode(xs)[0]], dim=-1)
     for lin in net.linears[:-1]:
         a = F.softplus(lin(a), beta=SOFTPLUS_BETA)

@@ -89,11 +89,11 @@ class MonoSDFTrainer:
         return torch.from_numpy(np.ascontiguousarray(arr[self.views]).reshape(shape).astype(np.float32))
 
     # ------------------------------------------------------------------ one step
-    def render_pixels(self, view: int, pixels: torch.Tensor, jitter: bool = True, extra_points: torch.Tensor | None = None,
+    def render_pixels(self, view: int | torch.Tensor, pixels: torch.Tensor, jitter: bool = True, extra_points: torch.Tensor | None = None,
                       t: torch.Tensor | None = None) -> RenderOutput:
-        """Render ``pixels`` (flat indices) of training view slot ``view`` (0..V-1) with that image's
-        appearance code; ``extra_points`` (E, 3): also their SDF gradients (``RenderOutput.extra_grad``);
-        ``t``: distances from :func:`hierarchical_samples` (None = sample here)."""
+        """Render ``pixels`` (flat indices) of training view slot ``view`` (0..V-1; or an (R,) slot per ray)
+        with that image's appearance code; ``extra_points`` (E, 3): also their SDF gradients
+        (``RenderOutput.extra_grad``); ``t``: distances from :func:`hierarchical_samples` (None = sample here)."""
         r = self.rays
         return render_rays(self.sdf, self.color, self.density, r.origins[view], r.dirs[view, pixels], r.z_factor[view, pixels],
                            r.far[view, pixels], r.world_to_cam_rot[view], self.cfg["near"], self.cfg["n_coarse"], self.cfg["n_fine"],
@@ -177,9 +177,7 @@ class MonoSDFTrainer:
                 surf = origins + dirs * t[rows, pick][:, None]
                 extra.append(surf + (torch.rand(R, 3, generator=self.gen) - 0.5) * jit)
         single = len(views) == 1
-        out = render_rays(self.sdf, self.color, self.density, origins, dirs, r.z_factor[slot, pixels], r.far[slot, pixels],
-                          r.world_to_cam_rot[views[0]] if single else r.world_to_cam_rot[slot], cfg["near"], cfg["n_coarse"],
-                          cfg["n_fine"], self.gen, True, extra_points=torch.cat(extra), t=t, image=views[0] if single else slot)
+        out = self.render_pixels(views[0] if single else slot, pixels, extra_points=torch.cat(extra), t=t)
         terms: dict[str, tuple[float, torch.Tensor]] = {"color": (float(cfg["color_weight"]), color_loss(out.rgb, self.rgb[slot, pixels]))}
         g_extra = out.extra_grad
         assert g_extra is not None

@@ -298,7 +298,7 @@ def test_coarse_to_fine_levels_switch_on_along_the_schedule(tiny_scene):
     """grid_levels_initial = 2, one more level every 25 % of the schedule; the inactive levels' table
     entries receive no gradient."""
     tr = _trainer(tiny_scene, grid_levels_initial=2, grid_level_every=0.25, iterations=8)
-    spec = tr.sdf.spec
+    spec = tr.sdf.grid.spec
     tr.step()
     assert tr.sdf.active_levels == 2
     g = tr.sdf.grid.table.grad
