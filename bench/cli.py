@@ -11,8 +11,9 @@
               [--set KEY=VALUE ...] [--sweep KEY=V1,V2] [--out DIR]
                                                  F-score / depth error / beta / losses along the schedule
 
-Bad input (a missing file, a bad recipe, an unknown table) prints one line naming the file and the
-problem and exits with status 2.
+Exit status: 0 everything ran; 1 (``bench run``) the tables were written but some job failed; 2 bad
+input (a missing file, a bad recipe, an unknown table or scene, an unwritable ``--out``, filters that
+match no job): one line naming the file and the problem; 130 interrupted (Ctrl-C, SIGTERM).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from pathlib import Path
 
 from bench.errors import BenchInputError
 
+EXIT_JOBS_FAILED = 1
 REPO_ROOT = Path(__file__).resolve().parent.parent
 TABLES_DIR = REPO_ROOT / "configs" / "tables"
 SCENES_DIR = REPO_ROOT / "configs" / "scenes"
@@ -106,6 +108,10 @@ def select_plans(spec, plans: list, rows: list[str] | None, scenes: list[str] | 
             raise BenchInputError(spec.path or spec.name, f"no row(s) {sorted(unknown)} (rows: {[r.label for r in spec.rows]})")
         plans = [p for p in plans if p.row in rows]
     if scenes:
+        unknown = set(scenes) - {p.scene for p in plans}
+        if unknown:
+            raise BenchInputError(spec.path or spec.name, f"no scene(s) {sorted(unknown)} in this table "
+                                  f"(scenes: {sorted({p.scene for p in plans})})")
         plans = [p for p in plans if p.scene in scenes]
     if seeds:
         plans = [replace(p, seed=s) for p in {(p.row, p.group, p.scene): p for p in plans}.values() for s in seeds]
@@ -135,21 +141,43 @@ def cmd_run(args: argparse.Namespace) -> int:
         jobs_by_table[name] = jobs
     every = [j for name in names for j in jobs_by_table[name]]
     todo = unique_jobs(every)
+    if not todo:
+        raise BenchInputError("bench run", f"nothing to run: no implemented job in table(s) {names} at scale {args.scale!r}"
+                              " with these filters")
+    check_writable(out)
     if len(names) > 1:
         print(f"{len(todo)} distinct jobs for {len(every)} table cells x seeds ({len(every) - len(todo)} shared between tables)")
     with _executor(args) as executor:
-        run_jobs(todo, out, force=args.force, show_progress=not args.quiet, executor=executor)
+        rows = run_jobs(todo, out, force=args.force, show_progress=not args.quiet, executor=executor)
+    failed = [r for r in rows if r.get("status") != "ok"]
+    status = EXIT_JOBS_FAILED if failed else 0
+    if failed:
+        print(f"{len(failed)} of {len(rows)} jobs failed (their cells show 'failed'; rerun retries them): exit {status}",
+              file=sys.stderr)
     df = collect_results(out)
     plans_by_table = {name: plan_index(jobs) for name, jobs in jobs_by_table.items()}
     if len(specs) > 1:
         path = render_report(specs, df, args.scale, out, available_methods(), plans=plans_by_table)
         print(f"wrote {path} (and each table's CSV, markdown and plot)")
-        return 0
+        return status
     report = build_table(specs[0], df, args.scale, available_methods(), plans=plans_by_table[specs[0].name])
     paths = write_table_outputs(report, out)
     _print_table_summary(paths["md"])
     print(f"wrote {paths['csv']}, {paths['md']}, {paths['png']}")
-    return 0
+    return status
+
+
+def check_writable(out: Path) -> None:
+    """Fail before any job runs when ``out`` cannot be created or written (a file in the way, read-only,
+    no space for even a probe file)."""
+    import tempfile
+
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=out, prefix=".probe-"):
+            pass
+    except OSError as exc:
+        raise BenchInputError(str(out), f"output folder is not writable: {exc.strerror or exc}") from None
 
 
 def _executor(args: argparse.Namespace):

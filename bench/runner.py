@@ -22,6 +22,7 @@ import math
 import os
 import platform
 import socket
+import sys
 import time
 import traceback
 from dataclasses import dataclass
@@ -251,9 +252,17 @@ def run_jobs(
         return (f"jobs [{executor.describe()}]: {done}/{len(todo)} done, {running} running, {failed} failed"
                 + (f", {retried} retried" if retried else ""))
 
+    # not a terminal (a nightly log, a pipe): no live bars, one plain line per job event instead
+    plain = show_progress and not sys.stdout.isatty()
+    t_start = time.perf_counter()
+
+    def line(msg: str) -> None:
+        if plain:
+            print(f"[{time.perf_counter() - t_start:7.0f} s] {msg}", flush=True)
+
     try:
         with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-                      TimeElapsedColumn(), disable=not show_progress, transient=False) as bar:
+                      TimeElapsedColumn(), disable=not show_progress or plain, transient=False) as bar:
             overall = bar.add_task(status(), total=len(todo))
             inner: dict[str, Any] = {}
 
@@ -266,15 +275,18 @@ def run_jobs(
 
                 return progress
 
-            for ev in executor.run(todo, Path(cache_dir), progress_for if show_progress else None):
+            line(f"{len(todo)} job(s) to run [{executor.describe()}]")
+            for ev in executor.run(todo, Path(cache_dir), progress_for if show_progress and not plain else None):
                 if ev.kind == "started":
                     running += 1
+                    line(f"started {_describe(ev.job)}")
                 elif ev.kind == "status" and ev.running is not None:
                     running = ev.running
                 elif ev.kind == "retry":
                     retried += 1
                     running = max(0, running - 1)
                     bar.console.print(f"[yellow]retrying[/yellow] {_describe(ev.job)} (attempt {ev.attempt}): {ev.message}")
+                    line(f"retrying {_describe(ev.job)} (attempt {ev.attempt}): {ev.message}")
                 elif ev.kind == "done":
                     assert ev.job is not None and ev.row is not None
                     atomic_write_json(result_path(out_dir, ev.job), ev.row)
@@ -288,11 +300,14 @@ def run_jobs(
                         err = ev.row.get("error") or {}
                         bar.console.print(f"[red]job failed[/red] {_describe(ev.job)}: {err.get('type')}: {err.get('message')}")
                     bar.advance(overall)
+                    f = (ev.row.get("metrics") or {}).get("fscore")
+                    line(f"{ev.row['status']} {_describe(ev.job)}" + (f": F {f:.3f}" if isinstance(f, float) else "")
+                         + f" ({(ev.row.get('timings') or {}).get('total', float('nan')):.0f} s); {status()}")
                 bar.update(overall, description=status())
     finally:
         if own:
             executor.close()
-    if not show_progress and todo:
+    if (not show_progress or plain) and todo:
         print(status())
     rows = []
     for j in jobs:

@@ -109,9 +109,17 @@ class MonoSDFTrainer:
 
     def _set_lr(self) -> None:
         frac = min(self.step_count / max(int(self.cfg["iterations"]), 1), 1.0)
-        decay = float(self.cfg["lr_decay"]) ** frac
+        decay = float(self.cfg["lr_decay"]) ** frac * max(self._warmup("lr_warmup"), 1e-2)
         for g, base in zip(self.optim.param_groups, self.base_lrs):
             g["lr"] = base * decay
+
+    def _warmup(self, key: str) -> float:
+        """Linear ramp of a loss weight from 0 at step 0 to 1 at ``cfg[key]`` (a fraction of the schedule;
+        0 = full weight from the start, MonoSDF)."""
+        frac = float(self.cfg.get(key, 0.0) or 0.0)
+        if frac <= 0:
+            return 1.0
+        return min(self.step_count / (frac * max(int(self.cfg["iterations"]), 1)), 1.0)
 
     def _per_image_terms(self, view: int, pixels: torch.Tensor, out: RenderOutput) -> dict[str, tuple[float, torch.Tensor]]:
         """The loss terms fitted per image on the rays ``pixels`` of slot ``view``: the scale-and-shift-
@@ -122,7 +130,7 @@ class MonoSDFTrainer:
         w = self.prior_weight[view, pixels]
         if self.prior_depth is not None and cfg["depth_weight"] > 0:
             loss, scale = ssi_depth_fit(out.depth, self.prior_depth[view, pixels], w, str(cfg.get("depth_negative_scale", "keep")))
-            terms["depth"] = (float(cfg["depth_weight"]), loss)
+            terms["depth"] = (float(cfg["depth_weight"]) * self._warmup("depth_warmup"), loss)
             self._depth_scales.append(float(scale))  # prior units per normalised unit (exact metric prior: the scene scale)
         if self.prior_normal is not None and cfg["normal_weight"] > 0:
             l1, ang = normal_loss(out.normal, self.prior_normal[view, pixels], w)

@@ -154,3 +154,35 @@ def test_jobs_that_train_run_before_fusion_only_jobs():
     jobs = [SimpleNamespace(config={}, job_id="oracle"), SimpleNamespace(config={"iterations": 600}, job_id="sdf1"),
             SimpleNamespace(config={"voxel_size": 0.02}, job_id="oracle2"), SimpleNamespace(config={"iterations": 300}, job_id="gs")]
     assert [j.job_id for j in training_first(jobs)] == ["sdf1", "gs", "oracle", "oracle2"]
+
+
+def test_scene_filter_typo_and_empty_selection_exit_2(tmp_path, capsys):
+    assert main(["run", "--table", "ablation", "--scale", "tiny", "--scenes", "scanet_like_tiny", "--out", str(tmp_path), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "scanet_like_tiny" in err[0] and "scannet_like_tiny" in err[0]
+    assert not (tmp_path / "tiny" / "jobs").exists()
+
+
+def test_unwritable_out_fails_before_any_job(tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    assert main(["run", "--table", "ablation", "--scale", "tiny", "--rows", ORACLE, "--out", str(blocker / "sub"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not writable" in err[0] and "file" in err[0]
+
+
+def test_failed_job_makes_run_exit_1_and_plain_log_has_a_line_per_job(tmp_path, monkeypatch, capsys):
+    """Not a terminal (pytest captures stdout): one plain line per job event; a failed job still writes the
+    tables, and the exit status says it failed."""
+    import bench.runner as runner
+
+    def broken(*a, **k):
+        raise ValueError("evaluation exploded")
+
+    monkeypatch.setattr(runner, "evaluate_snapshot", broken)
+    code = main(["run", "--table", "ablation", "--scale", "tiny", "--rows", ORACLE, "--out", str(tmp_path), "--workers", "1"])
+    captured = capsys.readouterr()
+    assert code == 1
+    assert "started Oracle" in captured.out and "failed Oracle" in captured.out
+    assert "jobs failed" in captured.err
+    assert (tmp_path / "tiny" / "ablation.md").exists()

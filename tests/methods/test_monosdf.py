@@ -306,3 +306,31 @@ def test_coarse_to_fine_levels_switch_on_along_the_schedule(tiny_scene):
     for _ in range(5):
         tr.step()
     assert tr.sdf.active_levels == 2 + 2  # step 5 of 8 = 62.5 %: two more levels
+
+
+def test_depth_warmup_ramps_the_depth_weight_only(tiny_scene):
+    """depth_warmup = 0.5 of 8 steps: the depth term contributes nothing at step 0 (its value is still
+    logged), half its weight at step 2 and all of it from step 4; warm-up 0 is MonoSDF (full weight)."""
+    tr = _trainer(tiny_scene, depth_warmup=0.5, iterations=8)
+    ramp = []
+    for _ in range(6):
+        ramp.append(tr._warmup("depth_warmup"))
+        logs = tr.step()
+        assert np.isfinite(logs["depth"])
+    assert ramp == [0.0, 0.25, 0.5, 0.75, 1.0, 1.0]
+    assert _trainer(tiny_scene)._warmup("depth_warmup") == 1.0
+    # at step 0 the total loss has no depth part
+    tr0 = _trainer(tiny_scene, depth_warmup=0.5, iterations=8)
+    logs = tr0.step(0)
+    rest = sum(tr0.cfg[f"{k}_weight"] * logs[k] for k in ("color", "eikonal", "smooth"))
+    rest += tr0.cfg["normal_weight"] * (logs["normal_l1"] + logs["normal_cos"])
+    assert logs["depth"] > 0 and abs(logs["loss"] - rest) < 1e-5 * max(1.0, abs(rest))
+
+
+def test_lr_warmup_ramps_every_group_from_one_percent(tiny_scene):
+    tr = _trainer(tiny_scene, lr_warmup=0.5, iterations=8, lr_decay=1.0)
+    seen = []
+    for _ in range(5):
+        tr.step()
+        seen.append([g["lr"] / b for g, b in zip(tr.optim.param_groups, tr.base_lrs)])
+    np.testing.assert_allclose(np.array(seen), np.array([[r] * len(tr.base_lrs) for r in (0.01, 0.25, 0.5, 0.75, 1.0)]))
