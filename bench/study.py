@@ -127,7 +127,9 @@ def run_one(run: StudyRun, snapshots: int) -> list[dict[str, Any]]:
 
 def _worker_init() -> None:
     from bench.executors.base import set_job_threads
+    from bench.executors.lifeline import exit_with_parent
 
+    exit_with_parent()  # a killed study leaves no worker training on (bench.executors.lifeline)
     set_job_threads(1)
 
 
@@ -226,7 +228,12 @@ def run_study(method: str, scene: str, scale: str, seeds: list[int], overrides: 
     title = f"{method} on {scene} ({scale}){' exact priors' if exact_priors else ''}; {overrides or ''}"
     out_dir = Path(out_dir)
     df = pd.DataFrame()
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("forkserver"), initializer=_worker_init)
+    from bench.executors.lifeline import FORKSERVER_PRELOAD, mark_parent
+
+    mark_parent()
+    ctx = mp.get_context("forkserver")
+    ctx.set_forkserver_preload(FORKSERVER_PRELOAD)
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init)
     try:
         futures = {pool.submit(run_one, r, snapshots): r for r in runs}
         for fut in as_completed(futures):

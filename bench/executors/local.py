@@ -23,31 +23,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Iterator, Sequence
 
+from bench.executors.lifeline import FORKSERVER_PRELOAD, exit_with_parent, mark_parent
 from bench.executors.base import DEFAULT_RETRIES, Event, Executor, ProgressFactory, execute_job, lost_row, set_job_threads, threads_per_job
 
 if TYPE_CHECKING:
     from bench.runner import Job
 
 START_METHOD = "forkserver"
-PRELOAD = ["bench.runner"]  # imported once by the fork server (torch, open3d, ...): workers start in ms
-
-
-def _exit_with_parent() -> None:
-    """Linux: the kernel sends SIGTERM to this worker when the process that started it dies (a killed
-    ``bench run`` must not leave its workers training on). No-op elsewhere."""
-    import ctypes
-    import signal
-    import sys
-
-    if sys.platform.startswith("linux"):
-        try:
-            ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, int(signal.SIGTERM))  # PR_SET_PDEATHSIG
-        except OSError:
-            pass
+PRELOAD = [*FORKSERVER_PRELOAD, "bench.runner"]  # imported once by the fork server (torch, open3d, ...): workers start in ms;
+# the lifeline first: the fork server dies with bench (bench.executors.lifeline)
 
 
 def _init_worker(threads: int) -> None:
-    _exit_with_parent()
+    exit_with_parent()
     set_job_threads(threads)
 
 
@@ -91,6 +79,7 @@ class LocalExecutor(Executor):
 
     def _new_pool(self) -> ProcessPoolExecutor:
         ctx = multiprocessing.get_context(self.start_method)
+        mark_parent()
         if self.start_method == "forkserver":
             ctx.set_forkserver_preload(PRELOAD)
         return ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx, initializer=_init_worker,

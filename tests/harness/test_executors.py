@@ -234,3 +234,42 @@ def _session_pids(sid: int) -> list[int]:
             if int(fields[3]) == sid and fields[0] != "Z":  # field 6 of stat: session id; skip zombies
                 pids.append(int(d))
     return pids
+
+
+_ORPHAN_SCRIPT = """
+import multiprocessing.forkserver as fs, time
+from bench.executors.local import LocalExecutor
+pool = LocalExecutor(workers=2)._new_pool()
+futures = [pool.submit(time.sleep, 120) for _ in range(2)]
+time.sleep(0.5)
+print(fs._forkserver._forkserver_pid, *pool._processes, flush=True)
+time.sleep(120)
+"""
+
+
+def test_kill_9_of_the_main_process_takes_the_pool_with_it(tmp_path):
+    """kill -9 of the process that started the pool (not its group): the fork server and both workers,
+    busy with a 120 s task, are gone within seconds (bench.executors.lifeline)."""
+    import subprocess
+
+    import psutil
+
+    proc = subprocess.Popen([sys.executable, "-c", _ORPHAN_SCRIPT], stdout=subprocess.PIPE, text=True,
+                            cwd=Path(__file__).resolve().parents[2], start_new_session=True)
+    try:
+        pids = [int(p) for p in proc.stdout.readline().split()]
+        assert len(pids) == 3, pids
+        assert all(psutil.pid_exists(p) for p in pids)
+        proc.kill()
+        proc.wait(timeout=10)
+        deadline = time.time() + 15
+        alive = pids
+        while alive and time.time() < deadline:
+            time.sleep(0.2)
+            alive = [p for p in alive if psutil.pid_exists(p) and psutil.Process(p).status() != psutil.STATUS_ZOMBIE]
+        assert not alive, f"still running after kill -9 of their parent: {alive}"
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass

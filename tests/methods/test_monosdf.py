@@ -334,3 +334,41 @@ def test_lr_warmup_ramps_every_group_from_one_percent(tiny_scene):
         tr.step()
         seen.append([g["lr"] / b for g, b in zip(tr.optim.param_groups, tr.base_lrs)])
     np.testing.assert_allclose(np.array(seen), np.array([[r] * len(tr.base_lrs) for r in (0.01, 0.25, 0.5, 0.75, 1.0)]))
+
+
+@pytest.mark.skipif(not fast_available(), reason="no C++ compiler")
+def test_stale_torch_build_lock_does_not_hang_the_next_run(tmp_path):
+    """A build killed mid-way leaves torch's ``lock`` file; the next process must load the kernel, not
+    wait forever (it did: issue 'Hard to break', item 1). The built kernel is copied into a fresh
+    TORCH_EXTENSIONS_DIR (no rebuild) and a stale lock is planted beside it."""
+    import os
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from torch.utils.cpp_extension import _get_build_directory
+
+    from methods.monosdf.grid import EXT_NAME
+
+    built = Path(_get_build_directory(EXT_NAME, False))
+    root = tmp_path / "ext"
+    shutil.copytree(built, root / EXT_NAME, ignore=shutil.ignore_patterns("lock", "bench-build.lock"))
+    (root / EXT_NAME / "lock").write_text("")
+    code = "from methods.monosdf.grid import _load_extension; import sys; sys.exit(0 if _load_extension() is not None else 3)"
+    res = subprocess.run([sys.executable, "-c", code], env={**os.environ, "TORCH_EXTENSIONS_DIR": str(root)},
+                         cwd=Path(__file__).resolve().parents[2], timeout=240, capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert not (root / EXT_NAME / "lock").exists()
+
+
+def test_build_lock_times_out_with_the_lock_file_named(tmp_path):
+    import fcntl
+
+    from methods.monosdf.grid import build_lock
+
+    with open(tmp_path / "bench-build.lock", "a+") as held:  # another live builder holds it
+        fcntl.flock(held, fcntl.LOCK_EX)
+        with pytest.raises(TimeoutError, match="bench-build.lock"):
+            with build_lock(tmp_path, timeout_s=0.6):
+                pass

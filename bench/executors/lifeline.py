@@ -1,0 +1,49 @@
+"""Every process a ``bench`` command starts dies with it, however it dies (``kill -9`` included).
+
+The process tree of a pool run: ``bench`` -> fork server -> workers, and ``bench`` -> resource tracker.
+Linux's ``PR_SET_PDEATHSIG`` makes the kernel signal a process when its parent dies, one level at a
+time, so each level arms it for itself:
+
+* the fork server: :func:`mark_parent` (called by ``bench`` before it starts a pool) puts bench's pid in
+  the environment, and the fork server imports this module through its preload list
+  (:data:`FORKSERVER_PRELOAD`); the import arms the signal in the process whose parent is that pid
+  (and in no other: ``bench`` itself, started by a shell or ``nohup``, must not die with its shell);
+* the workers (their parent is the fork server): :func:`exit_with_parent` in the pool initializer.
+
+When ``bench`` dies the fork server is killed, which kills the workers; the resource tracker then reads
+EOF from its last writer and exits by itself. No-op outside Linux.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+
+ENV = "BENCH_LIFELINE_PID"
+FORKSERVER_PRELOAD = [__name__]
+
+
+def exit_with_parent(sig: int = signal.SIGKILL) -> None:
+    """Ask the kernel to send ``sig`` to this process when its parent dies; exit now if the parent is
+    already gone (it died before the signal was armed)."""
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+
+    parent = os.getppid()
+    try:
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, int(sig))  # PR_SET_PDEATHSIG
+    except OSError:
+        return
+    if os.getppid() != parent or parent == 1:
+        os._exit(1)
+
+
+def mark_parent() -> None:
+    """Record this process as the one whose death must take the fork server (and so the pool) with it."""
+    os.environ[ENV] = str(os.getpid())
+
+
+if os.environ.get(ENV) == str(os.getppid()):  # imported by the fork server bench started: arm it
+    exit_with_parent()
