@@ -22,6 +22,7 @@ LLFF (``poses_bounds.npy``, (N, 17) float64): each row is a (3, 5) matrix flatte
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -146,3 +147,19 @@ def is_rotation(R: np.ndarray, atol: float = 1e-4) -> bool:
     if not np.all(np.isfinite(R)):
         return False
     return bool(np.allclose(R.T @ R, np.eye(3), atol=atol) and abs(np.linalg.det(R) - 1) < atol)
+
+
+def check_view_numbering(paths: list[Path], index_of: Callable[[Path], str], cameras: str) -> None:
+    """Formats that pair the i-th image (sorted by name) with camera i (IDR / MonoSDF ``world_mat_i``)
+    silently give every image after a gap its neighbour's pose. When the names are numbers they must be
+    consecutive (they may start anywhere: real MonoSDF folders do); a view missing at either end shows
+    as more cameras than images instead. ``index_of`` maps a path to its number's text; ``cameras`` names
+    the camera file."""
+    stems = [index_of(p) for p in paths]
+    if not stems or not all(s.isdigit() for s in stems):
+        return
+    first = int(stems[0])
+    for i, (p, s) in enumerate(zip(paths, stems)):
+        if int(s) != first + i:
+            raise BenchInputError(p.parent, f"image number {first + i} is missing (the next is {p.name}); images are "
+                                  f"paired with {cameras} by position, so the numbers must be consecutive")

@@ -37,6 +37,7 @@ import numpy as np
 
 from bench.errors import BenchInputError
 from bench.formats import codec, extras
+from bench.formats.cameras import check_view_numbering
 from bench.formats.monosdf import read_cameras_npz, write_cameras_npz
 from bench.scene import Scene
 
@@ -111,6 +112,7 @@ def load(root: Path, fmt: str = "dtu", train_views: Sequence[int] | None = None)
     image_paths = _list_images(root / IMAGE_DIR)
     n = len(image_paths)
     cam_file = next((root / f for f in CAMERA_FILES if (root / f).is_file()), root / CAMERA_FILES[0])
+    check_view_numbering(image_paths, lambda p: p.stem, cam_file.name)
     K, c2w, scale_mat = read_cameras_npz(cam_file, n)
 
     first = codec.read_rgb(image_paths[0])

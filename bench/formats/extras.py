@@ -204,7 +204,27 @@ def read_side_files(root: Path) -> SideFiles:
         except (KeyError, TypeError, ValueError) as e:
             raise BenchInputError(path, f"malformed instance table ({type(e).__name__}: {e})") from None
     mesh = root / GT_MESH_FILE
+    if mesh.is_file():
+        check_gt_mesh(mesh)
     return SideFiles(meta, seg_background, instances, mesh if mesh.is_file() else None)
+
+
+def check_gt_mesh(path: Path) -> None:
+    """A readable triangle mesh with finite vertices and faces that index them (a truncated or corrupt
+    ``gt_mesh.ply`` fails here, naming the file, not at evaluation time)."""
+    import trimesh
+
+    try:
+        mesh = trimesh.load(path, force="mesh", process=False)
+    except Exception as exc:  # trimesh raises ValueError / KeyError / struct errors on broken files
+        raise BenchInputError(path, f"GT mesh cannot be read ({type(exc).__name__}: {exc})") from None
+    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    if len(v) == 0 or len(f) == 0:
+        raise BenchInputError(path, f"GT mesh is empty ({len(v)} vertices, {len(f)} faces)")
+    if not np.isfinite(v).all():
+        raise BenchInputError(path, "GT mesh has NaN or inf vertices")
+    if f.min() < 0 or f.max() >= len(v):
+        raise BenchInputError(path, f"GT mesh faces index vertex {int(f.max())} of {len(v)}")
 
 
 def meta_splits(meta: dict[str, Any], where: Path, num_views: int) -> dict[str, np.ndarray]:

@@ -216,8 +216,13 @@ def read_poses_bounds(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, t
         if not is_rotation(m[:, :3]):
             raise BenchInputError(path, f"pose {i} rotation is not orthonormal with determinant +1")
         c2w.append(llff_to_opencv(m[:, :4]))
+    bounds = arr[:, 15:17].copy()
+    bad = np.flatnonzero((bounds[:, 0] <= 0) | (bounds[:, 1] <= bounds[:, 0]))
+    if bad.size:
+        i = int(bad[0])
+        raise BenchInputError(path, f"bounds of view {i} are near {bounds[i, 0]:g}, far {bounds[i, 1]:g}: need 0 < near < far")
     H, W = int(round(hwf[0, 0])), int(round(hwf[0, 1]))
-    return np.stack(c2w), hwf[:, 2].copy(), arr[:, 15:17].copy(), (H, W)
+    return np.stack(c2w), hwf[:, 2].copy(), bounds, (H, W)
 
 
 def load(root: Path, fmt: str = "llff", factor: int = 1) -> Scene:

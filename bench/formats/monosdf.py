@@ -26,6 +26,7 @@ splits to none (every view trains), unless ``meta.json`` says otherwise.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +34,7 @@ import numpy as np
 
 from bench.errors import BenchInputError
 from bench.formats import codec, extras
-from bench.formats.cameras import compose_world_mat, decompose_world_mat
+from bench.formats.cameras import check_view_numbering, compose_world_mat, decompose_world_mat
 from bench.formats.npz import load_npy, load_npz, save_npz, save_npy
 from bench.scene import Scene
 
@@ -58,6 +59,9 @@ def read_cameras_npz(path: Path, n: int) -> tuple[np.ndarray, np.ndarray, np.nda
         scale_mat (4, 4) float64 (``scale_mat_0``).
     """
     data = load_npz(path)
+    n_cams = len([k for k in data if re.fullmatch(r"world_mat_\d+", k)])
+    if n_cams > n:
+        raise BenchInputError(path, f"holds {n_cams} cameras (world_mat_*) for {n} images")
     Ks, poses = [], []
     scale_mat0 = None
     for i in range(n):
@@ -102,6 +106,7 @@ def load(root: Path, fmt: str) -> Scene:
         raise BenchInputError(root, "no *_rgb.png images found")
     prefixes = tuple(p.name[: -len("_rgb.png")] for p in rgb_paths)
     n = len(rgb_paths)
+    check_view_numbering(rgb_paths, lambda p: p.name[: -len("_rgb.png")], CAMERAS_FILE)
     K, c2w, scale_mat = read_cameras_npz(root / CAMERAS_FILE, n)
 
     first = codec.read_rgb(rgb_paths[0])

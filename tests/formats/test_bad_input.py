@@ -303,3 +303,47 @@ def test_dtu_singular_scale_mat(dtu):
 def test_zip_member_is_pickle_free(dtu):
     with zipfile.ZipFile(dtu / "cameras.npz") as zf:
         assert all(n.endswith(".npy") for n in zf.namelist())
+
+
+# ------------------------------------------------------------------------------ views paired by position
+def _drop_view(folder, fmt: str, i: int):
+    """Remove view i's files the way a user deleting one frame would (the format's own files only)."""
+    if fmt == "scannet":
+        for p in folder.glob(f"{i:06d}_*"):
+            p.unlink()
+    else:
+        (folder / "image" / f"{i:06d}.png").unlink()
+        (folder / "mask" / f"{i:03d}.png").unlink()
+
+
+@pytest.mark.parametrize("fmt", ["scannet", "dtu"])
+def test_a_removed_view_is_not_silently_paired_with_its_neighbours_pose(tmp_path, scene, fmt):
+    folder = write(scene, tmp_path / fmt, fmt)
+    _drop_view(folder, fmt, 2)
+    with raises(r"image number 2 is missing \(the next is 0+3[_.].*paired with cameras(_sphere)?\.npz by position"):
+        load_scene(folder, fmt)
+
+
+def test_more_cameras_than_images(scannet):
+    arrays = load_npz(scannet / "cameras.npz")
+    n = len([k for k in arrays if k.startswith("world_mat_")])
+    rewrite_npz(scannet / "cameras.npz", **{f"world_mat_{n}": arrays["world_mat_0"], f"scale_mat_{n}": arrays["scale_mat_0"]})
+    with raises(rf"cameras\.npz: holds {n + 1} cameras \(world_mat_\*\) for {n} images"):
+        load_scene(scannet)
+
+
+def test_truncated_gt_mesh(tmp_path, scene, gt_mesh):
+    folder = write(scene, tmp_path / "scannet", "scannet", gt_mesh=gt_mesh)
+    data = (folder / "gt_mesh.ply").read_bytes()
+    (folder / "gt_mesh.ply").write_bytes(data[: len(data) // 2])
+    with raises(r"gt_mesh\.ply: GT mesh cannot be read"):
+        load_scene(folder)
+
+
+@pytest.mark.parametrize("near, far", [(-0.5, 4.0), (3.0, 2.0), (0.0, 1.0)])
+def test_llff_bounds_must_satisfy_0_lt_near_lt_far(llff, near, far):
+    pb = np.load(llff / "poses_bounds.npy")
+    pb[1, 15:17] = (near, far)
+    np.save(llff / "poses_bounds.npy", pb)
+    with raises(r"poses_bounds\.npy: bounds of view 1 are near .*need 0 < near < far"):
+        load_scene(llff)
