@@ -212,6 +212,8 @@ def needs_run(path: Path, force: bool = False) -> bool:
         stored = json.loads(path.read_text())
     except (OSError, ValueError):
         return True  # unreadable: run it again (the write is atomic, so this is not a half-written row)
+    if not isinstance(stored, dict):
+        return True  # `null`, `[]`, a bare number: not a result row, run it again
     return stored.get("status") == "failed" and (stored.get("error") or {}).get("type") == WORKER_LOST
 
 

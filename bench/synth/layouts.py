@@ -29,7 +29,7 @@ from bench.synth.geometry import (
     load_user_mesh,
     place_on_floor,
 )
-from bench.synth.recipe import Recipe, resolve_mesh_path
+from bench.synth.recipe import Recipe, check_number, resolve_mesh_path
 
 ROOM_PRESETS: dict[str, dict[str, Any]] = {
     # ScanNet: hand-held RGB-D sweeps of ordinary rooms; shaky trajectories.
@@ -85,6 +85,16 @@ def _sphere_scale_mat(centre: np.ndarray, radius: float) -> np.ndarray:
     return m
 
 
+def _number_list(recipe: Recipe, keys: tuple[str, ...], scale: str, default: list[float], length: int | None = None,
+                 **bounds: Any) -> tuple[float, ...]:
+    """A list of checked numbers at ``keys`` (``length`` of them if given); bounds as in check_number."""
+    value = recipe.get(*keys, scale=scale, default=default)
+    where = recipe.where(*keys)
+    if not isinstance(value, (list, tuple)) or (length is not None and len(value) != length) or not value:
+        raise BenchInputError(where, f"must be a list of {length or 'one or more'} numbers, got {value!r}")
+    return tuple(check_number(v, where, **bounds) for v in value)
+
+
 def _image_size(recipe: Recipe, scale: str, default: Any) -> tuple[int, int]:
     wh = recipe.get("image", scale=scale, default=None)
     if wh is None:
@@ -99,20 +109,21 @@ def _make_object(recipe: Recipe, spec: dict[str, Any], name: str, rng: np.random
     kind = spec["type"]
     if kind == "mesh":
         path = resolve_mesh_path(recipe, spec["path"])
-        size = float(spec.get("size", 0.5))
+        size = check_number(spec.get("size", 0.5), recipe.where("objects", spec["type"], "size"), lo=0.0, lo_open=True)
         mesh = load_user_mesh(path, size, recipe.where("objects"))
         return mesh, str(spec.get("category", path.stem)), bool(spec.get("thin", False))
     mesh, thin = FURNITURE[kind](rng)
     if "size" in spec:  # rescale so the largest extent is `size` metres
         mesh = mesh.copy()
-        mesh.apply_scale(float(spec["size"]) / float(np.max(mesh.extents)))
+        size = check_number(spec["size"], recipe.where("objects", spec["type"], "size"), lo=0.0, lo_open=True)
+        mesh.apply_scale(size / float(np.max(mesh.extents)))
     return mesh, kind, thin
 
 
-def _expand(specs: list[dict[str, Any]]) -> list[dict[str, Any]]:
+def _expand(specs: list[dict[str, Any]], where: str) -> list[dict[str, Any]]:
     out = []
-    for s in specs:
-        out.extend([s] * int(s.get("count", 1)))
+    for i, s in enumerate(specs):
+        out.extend([s] * check_number(s.get("count", 1), f"{where} [objects.{i}.count]", integer=True, lo=1))
     return out
 
 
@@ -133,19 +144,19 @@ def build_room(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layout:
     if not (isinstance(size, list) and len(size) == 3 and all(isinstance(v, (int, float)) and v > 1.0 for v in size)):
         raise BenchInputError(recipe.where("room", "size"), f"room size must be 3 numbers > 1 m, got {size!r}")
     size = tuple(float(v) for v in size)
-    n_views = int(recipe.get("cameras", "views", scale=scale, default=preset["views"][scale] if scale in preset["views"] else None) or 0)
-    if n_views < 2:
-        raise BenchInputError(recipe.where("cameras", "views"), f"need >= 2 views, got {n_views}")
+    n_views = recipe.number("cameras", "views", scale=scale, default=preset["views"].get(scale), integer=True, lo=2)
     width, height = _image_size(recipe, scale, preset["image"])
-    jitter = float(recipe.get("cameras", "jitter", scale=scale, default=preset["jitter"]))
-    hfov = float(recipe.get("cameras", "hfov", scale=scale, default=preset["hfov"]))
-    height_range = tuple(recipe.get("cameras", "height", scale=scale, default=[1.2, 1.6]))
+    jitter = recipe.number("cameras", "jitter", scale=scale, default=preset["jitter"], lo=0.0)
+    hfov = recipe.number("cameras", "hfov", scale=scale, default=preset["hfov"], lo=0.0, hi=170.0, lo_open=True)
+    height_range = _number_list(recipe, ("cameras", "height"), scale, [1.2, 1.6], 2, lo=0.0)
+    if not height_range[0] <= height_range[1] < size[2]:
+        raise BenchInputError(recipe.where("cameras", "height"), f"need low <= high < the room height {size[2]:g} m, got {list(height_range)}")
 
     poses = cams.room_path(size, n_views, rng, height_range=height_range, jitter=jitter)
     clear = [np.array([p[:2, 3] - 0.25, p[:2, 3] + 0.25]) for p in poses]
 
     objects = build_room_shell(size, rng)
-    specs = _expand(recipe.raw.get("objects") or preset["objects"])
+    specs = _expand(recipe.raw.get("objects") or preset["objects"], recipe.where())
     counts: dict[str, int] = {}
     items = []
     for spec in specs:
@@ -182,11 +193,13 @@ def build_object(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layout
     extent = float(np.max(mesh.extents))
     centre = mesh.bounds.mean(axis=0)
     width, height = _image_size(recipe, scale, {"tiny": [64, 48], "small": [128, 96], "medium": [200, 150], "large": [400, 300]})
-    distance = float(recipe.get("cameras", "distance", scale=scale, default=2.6 * extent))
-    hfov = float(recipe.get("cameras", "hfov", scale=scale, default=40.0))
-    train_az = np.asarray(recipe.get("cameras", "train_azimuths", scale=scale, default=[-40.0, 0.0, 40.0]), dtype=float)
-    train_el = np.asarray(recipe.get("cameras", "train_elevations", scale=scale, default=[30.0, 25.0, 35.0]), dtype=float)
-    n_eval = int(recipe.get("cameras", "eval_views", scale=scale, default={"tiny": 8, "small": 24, "medium": 48, "large": 64}[scale]))
+    distance = recipe.number("cameras", "distance", scale=scale, default=2.6 * extent, lo=0.0, lo_open=True)
+    hfov = recipe.number("cameras", "hfov", scale=scale, default=40.0, lo=0.0, hi=170.0, lo_open=True)
+    train_az = np.asarray(_number_list(recipe, ("cameras", "train_azimuths"), scale, [-40.0, 0.0, 40.0]), dtype=float)
+    train_el = np.asarray(_number_list(recipe, ("cameras", "train_elevations"), scale, [30.0, 25.0, 35.0], len(train_az),
+                                       lo=-89.0, hi=89.0), dtype=float)
+    n_eval = recipe.number("cameras", "eval_views", scale=scale, default={"tiny": 8, "small": 24, "medium": 48, "large": 64}[scale],
+                           integer=True, lo=1)
     eval_az = np.linspace(-90.0, 90.0, n_eval) + rng.uniform(-3, 3, n_eval)
     eval_el = rng.uniform(15.0, 60.0, n_eval)
     poses = np.concatenate([cams.sphere_views(centre, distance, train_az, train_el), cams.sphere_views(centre, distance, eval_az, eval_el)])
@@ -201,7 +214,8 @@ def build_object(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layout
 
 
 def build_forward(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layout:
-    specs = _expand(recipe.raw.get("objects") or [{"type": "plant"}, {"type": "lamp"}, {"type": "chair"}, {"type": "table"}, {"type": "cabinet"}])
+    specs = _expand(recipe.raw.get("objects") or [{"type": "plant"}, {"type": "lamp"}, {"type": "chair"}, {"type": "table"}, {"type": "cabinet"}],
+                    recipe.where())
     far = 6.0
     objects = [
         SceneObject("ground", "floor", _box((8.0, far + 1, 0.05), (0.0, far / 2, -0.025)), True, False, _jitter_colour(rng, (0.5, 0.45, 0.4)), "tiles", 0.4),
@@ -218,9 +232,9 @@ def build_forward(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layou
         counts[category] = counts.get(category, 0) + 1
         objects.append(_scene_object(name, category, mesh, thin, rng))
     width, height = _image_size(recipe, scale, {"tiny": [128, 96], "small": [256, 192], "medium": [504, 378], "large": [1008, 756]})
-    grid = tuple(recipe.get("cameras", "grid", scale=scale, default=[5, 4]))
-    spacing = tuple(recipe.get("cameras", "spacing", scale=scale, default=[0.08, 0.06]))
-    hfov = float(recipe.get("cameras", "hfov", scale=scale, default=60.0))
+    grid = tuple(int(v) for v in _number_list(recipe, ("cameras", "grid"), scale, [5, 4], 2, lo=1, integer=True))
+    spacing = _number_list(recipe, ("cameras", "spacing"), scale, [0.08, 0.06], 2, lo=0.0, lo_open=True)
+    hfov = recipe.number("cameras", "hfov", scale=scale, default=60.0, lo=0.0, hi=170.0, lo_open=True)
     poses = cams.forward_grid(np.array([0.0, 0.0, 1.0]), grid, spacing, look_distance=3.0, rng=rng)
     n = len(poses)
     K = np.repeat(cams.intrinsics(width, height, hfov)[None], n, axis=0)

@@ -38,7 +38,9 @@ def make_scene(recipe: Recipe, scale: str = "small", seed: int | None = None) ->
 
     if scale not in SCALES:
         raise BenchInputError(recipe.where(), f"scale must be one of {SCALES}, got {scale!r}")
-    seed = recipe.seed if seed is None else int(seed)
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
+        raise BenchInputError("--seed", f"must be a non-negative integer, got {seed!r}")
+    seed = recipe.seed if seed is None else seed
     geom_rng = np.random.default_rng([seed, 0])
     layout = build_layout(recipe, scale, geom_rng)
     if len(layout.poses) == 0:

@@ -23,6 +23,7 @@ Example (a user's own recipe with their own mesh)::
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -60,9 +61,29 @@ class Recipe:
             node = node[k]
         return resolve_scale(node, scale, self.where(*keys))
 
+    def number(self, *keys: str, default: Any = None, scale: str = "small", integer: bool = False,
+               lo: float | None = None, hi: float | None = None, lo_open: bool = False) -> float | int:
+        """:meth:`get` a number, checked: an int (``integer``) or a float in [lo, hi] ((lo, hi] with
+        ``lo_open``); anything else is a BenchInputError naming the recipe and the key path."""
+        return check_number(self.get(*keys, default=default, scale=scale), self.where(*keys), integer, lo, hi, lo_open)
+
     def where(self, *keys: str) -> str:
         base = str(self.path) if self.path else self.name
         return f"{base} [{'.'.join(keys)}]" if keys else base
+
+
+def check_number(value: Any, where: str, integer: bool = False, lo: float | None = None, hi: float | None = None,
+                 lo_open: bool = False) -> float | int:
+    """``value`` as an int / float within the bounds, or BenchInputError naming ``where``."""
+    kind = "an integer" if integer else "a number"
+    ok_type = isinstance(value, int) if integer else isinstance(value, (int, float))
+    if isinstance(value, bool) or not ok_type or (not integer and not math.isfinite(value)):
+        raise BenchInputError(where, f"must be {kind}, got {value!r}")
+    if lo is not None and (value <= lo if lo_open else value < lo):
+        raise BenchInputError(where, f"must be {'>' if lo_open else '>='} {lo:g}, got {value!r}")
+    if hi is not None and value > hi:
+        raise BenchInputError(where, f"must be <= {hi:g}, got {value!r}")
+    return int(value) if integer else float(value)
 
 
 def resolve_scale(value: Any, scale: str, where: str) -> Any:

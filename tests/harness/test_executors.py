@@ -111,6 +111,14 @@ def test_a_job_that_raised_is_kept_on_rerun(tmp_path):
     assert not needs_run(path) and needs_run(path, force=True)
 
 
+@pytest.mark.parametrize("content", ["null", "[]", "3", "{not json"])
+def test_a_stored_row_that_is_not_an_object_is_rerun(tmp_path, content):
+    path = result_path(tmp_path, _job(0, "n"))
+    path.parent.mkdir(parents=True)
+    path.write_text(content)
+    assert needs_run(path)
+
+
 def test_duplicate_job_ids_run_once(tmp_path):
     calls = []
 

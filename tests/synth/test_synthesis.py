@@ -191,3 +191,31 @@ def test_per_scale_values_need_the_requested_scale():
     r = parse_recipe({"name": "x", "kind": "room", "format": "scannet", "image": {"small": [128, 96]}}, "mem")
     with pytest.raises(BenchInputError, match="no value for scale 'tiny'"):
         make_scene(r, scale="tiny")
+
+
+@pytest.mark.parametrize(
+    "patch, match",
+    [
+        ({"objects": [{"type": "chair", "count": "two"}]}, r"objects\.0\.count\]: must be an integer, got 'two'"),
+        ({"objects": [{"type": "chair", "count": -2}]}, r"objects\.0\.count\]: must be >= 1, got -2"),
+        ({"objects": [{"type": "chair", "size": 0}]}, r"objects\.chair\.size\]: must be > 0, got 0"),
+        ({"objects": [{"type": "chair", "size": "big"}]}, r"objects\.chair\.size\]: must be a number"),
+        ({"cameras": {"views": "many"}}, r"cameras\.views\]: must be an integer, got 'many'"),
+        ({"cameras": {"hfov": -30}}, r"cameras\.hfov\]: must be > 0, got -30"),
+        ({"cameras": {"jitter": "lots"}}, r"cameras\.jitter\]: must be a number"),
+        ({"cameras": {"height": [1.6, 1.2]}}, r"cameras\.height\]: need low <= high"),
+    ],
+)
+def test_bad_recipe_values_name_the_key(tmp_path, patch, match):
+    """Values the recipe schema cannot check by type alone are range-checked where they are read, with
+    the offending key in the one-line message (they were tracebacks or silently accepted)."""
+    path = _write_recipe(tmp_path, {"name": "v", "kind": "room", "format": "scannet", "preset": "scannet",
+                                    "objects": [{"type": "table"}], **patch})
+    with pytest.raises(BenchInputError, match=match) as err:
+        make_scene(load_recipe(path), scale="tiny")
+    assert str(path) in str(err.value)
+
+
+def test_negative_seed_override_is_a_clear_error():
+    with pytest.raises(BenchInputError, match="--seed: must be a non-negative integer, got -1"):
+        make_scene(load_recipe(SCENES / "scannet_like_tiny.yaml"), scale="tiny", seed=-1)
