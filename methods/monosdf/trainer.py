@@ -43,6 +43,28 @@ def resolve_inside_out(value: Any, scene: Scene) -> bool:
     raise ValueError(f"inside_out must be true, false or 'auto', got {value!r}")
 
 
+def depth_edges(depth: np.ndarray, jump_m: float = 0.10) -> np.ndarray:
+    """(H, W) bool: pixels within 1 px (8-neighbourhood) of a depth discontinuity, i.e. a 4-neighbour
+    pair of valid depths (> 0, metres) differing by more than ``jump_m``, or a valid / invalid border."""
+    d = np.asarray(depth, dtype=np.float64)
+    valid = d > 0
+    jump = np.zeros(d.shape, dtype=bool)
+    for axis in (0, 1):
+        a = np.swapaxes(d, 0, axis)
+        v = np.swapaxes(valid, 0, axis)
+        pair = ((np.abs(a[1:] - a[:-1]) > jump_m) & v[1:] & v[:-1]) | (v[1:] != v[:-1])
+        j = np.swapaxes(jump, 0, axis)
+        j[1:] |= pair
+        j[:-1] |= pair
+    grown = jump.copy()
+    grown[1:] |= jump[:-1]
+    grown[:-1] |= jump[1:]
+    out = grown.copy()
+    out[:, 1:] |= grown[:, :-1]
+    out[:, :-1] |= grown[:, 1:]
+    return out
+
+
 class MonoSDFTrainer:
     """Holds the scene's training data, the networks and the optimiser."""
 
@@ -234,18 +256,24 @@ class MonoSDFTrainer:
         against GT) and ``mesh_ahead_frac``: the fraction of those pixels where the mesh surface lies more
         than 10 cm in front of the volume-rendered depth (surfaces the rendering does not weigh);
         ``sampler_gap_median`` / ``sampler_gap_p90``: |depth with the training sampler - depth with 8x the
-        coarse samples| (m), how far the sampler's depth is from what a dense sampling of the same field gives."""
+        coarse samples| (m), how far the sampler's depth is from what a dense sampling of the same field gives;
+        ``edge_px_frac`` (pixels within 1 px of a GT depth jump, :func:`depth_edges`) and the error split into
+        ``depth_err_edge_median`` / ``depth_err_interior_median`` / ``depth_err_interior_p90`` (a blur across
+        occlusion edges vs a surface in the wrong place); ``depth_fit_scale_iqr``: interquartile range of the
+        per-batch fitted scales."""
         out = {"beta": float(self.density.beta().detach())}
         n = max(self._log_count, 1)
         out.update({f"loss_{k}": v / n for k, v in self._log_sums.items() if k != "beta"})
         if self._depth_scales:
             out["depth_neg_scale_frac"] = float(np.mean(np.asarray(self._depth_scales) <= 0))
             out["depth_fit_scale_median"] = float(np.median(self._depth_scales))
+            q1, q3 = np.percentile(self._depth_scales, [25, 75])
+            out["depth_fit_scale_iqr"] = float(q3 - q1)  # spread of the per-batch fits: a consistent geometry fits one scale
         self._log_sums, self._log_count, self._depth_scales = {}, 0, []
         k = int(self.cfg.get("diag_views", 0))
         if k > 0 and self.scene.gt_depth is not None:
             stride = int(self.cfg.get("diag_stride", 2))
-            errs, mesh_errs, ahead, gaps = [], [], [], []
+            errs, edge_flags, mesh_errs, ahead, gaps = [], [], [], [], []
             slots = np.unique(np.linspace(0, len(self.views) - 1, k).round().astype(int))
             mesh_depth = None
             if mesh is not None and len(mesh.faces):
@@ -257,6 +285,7 @@ class MonoSDFTrainer:
                 gt = self.scene.gt_depth[self.views[slot]][::stride, ::stride]
                 pred = self.render_view_depth(int(slot), stride=stride)
                 errs.append(np.abs(pred - gt)[gt > 0])
+                edge_flags.append(depth_edges(self.scene.gt_depth[self.views[slot]])[::stride, ::stride][gt > 0])
                 dense = self.render_view_depth(int(slot), stride=stride, n_coarse=8 * int(self.cfg["n_coarse"]))
                 gaps.append(np.abs(pred - dense)[gt > 0])
                 if mesh_depth is not None:
@@ -268,6 +297,13 @@ class MonoSDFTrainer:
             if len(e):
                 out["depth_err_median"] = float(np.median(e))
                 out["depth_err_p90"] = float(np.percentile(e, 90))
+                edge = np.concatenate(edge_flags)
+                out["edge_px_frac"] = float(edge.mean())
+                if (~edge).any():
+                    out["depth_err_interior_median"] = float(np.median(e[~edge]))
+                    out["depth_err_interior_p90"] = float(np.percentile(e[~edge], 90))
+                if edge.any():
+                    out["depth_err_edge_median"] = float(np.median(e[edge]))
                 g = np.concatenate(gaps)
                 out["sampler_gap_median"] = float(np.median(g))
                 out["sampler_gap_p90"] = float(np.percentile(g, 90))

@@ -372,3 +372,16 @@ def test_build_lock_times_out_with_the_lock_file_named(tmp_path):
         with pytest.raises(TimeoutError, match="bench-build.lock"):
             with build_lock(tmp_path, timeout_s=0.6):
                 pass
+
+
+def test_depth_edges_mark_both_sides_of_a_jump_only():
+    from methods.monosdf.trainer import depth_edges
+
+    d = np.full((6, 8), 2.0)
+    d[:, 4:] = 3.0  # a 1 m jump between columns 3 and 4
+    e = depth_edges(d)
+    assert e[:, 2:6].all() and not e[:, :2].any() and not e[:, 6:].any()
+    assert not depth_edges(np.full((5, 5), 2.0) + np.arange(5) * 0.05).any()  # a slanted plane: no edge
+    z = np.full((5, 5), 2.0)
+    z[2, 2] = 0.0  # an invalid pixel: its neighbours are a border
+    assert depth_edges(z)[1:4, 1:4].all() and not depth_edges(z)[0, 0]
