@@ -43,6 +43,9 @@ def resolve_inside_out(value: Any, scene: Scene) -> bool:
     raise ValueError(f"inside_out must be true, false or 'auto', got {value!r}")
 
 
+WEIGHTED_SAMPLE = 1e-4  # a sample with a smaller rendering weight counts as empty space in ``samples_weighted``
+
+
 def depth_edges(depth: np.ndarray, jump_m: float = 0.10) -> np.ndarray:
     """(H, W) bool: pixels within 1 px (8-neighbourhood) of a depth discontinuity, i.e. a 4-neighbour
     pair of valid depths (> 0, metres) differing by more than ``jump_m``, or a valid / invalid border."""
@@ -239,7 +242,8 @@ class MonoSDFTrainer:
         logs = {k: float(v.detach()) for k, (_, v) in terms.items()}
         logs["loss"] = float(loss.detach())
         logs["beta"] = float(self.density.beta().detach())
-        for k, v in logs.items():
+        stats = {"samples_weighted": float((out.weights.detach() > WEIGHTED_SAMPLE).sum(-1).float().mean())}
+        for k, v in {**logs, **stats}.items():
             self._log_sums[k] = self._log_sums.get(k, 0.0) + v
         self._log_count += 1
         return logs
@@ -257,13 +261,14 @@ class MonoSDFTrainer:
         than 10 cm in front of the volume-rendered depth (surfaces the rendering does not weigh);
         ``sampler_gap_median`` / ``sampler_gap_p90``: |depth with the training sampler - depth with 8x the
         coarse samples| (m), how far the sampler's depth is from what a dense sampling of the same field gives;
-        ``edge_px_frac`` (pixels within 1 px of a GT depth jump, :func:`depth_edges`) and the error split into
+        ``samples_weighted``: rendered samples per ray whose weight exceeds :data:`WEIGHTED_SAMPLE` (the
+        rest cost as much and carry almost nothing: the room a narrow-band sampler has); ``edge_px_frac`` (pixels within 1 px of a GT depth jump, :func:`depth_edges`) and the error split into
         ``depth_err_edge_median`` / ``depth_err_interior_median`` / ``depth_err_interior_p90`` (a blur across
         occlusion edges vs a surface in the wrong place); ``depth_fit_scale_iqr``: interquartile range of the
         per-batch fitted scales."""
         out = {"beta": float(self.density.beta().detach())}
         n = max(self._log_count, 1)
-        out.update({f"loss_{k}": v / n for k, v in self._log_sums.items() if k != "beta"})
+        out.update({(k if k.startswith("samples_") else f"loss_{k}"): v / n for k, v in self._log_sums.items() if k != "beta"})
         if self._depth_scales:
             out["depth_neg_scale_frac"] = float(np.mean(np.asarray(self._depth_scales) <= 0))
             out["depth_fit_scale_median"] = float(np.median(self._depth_scales))

@@ -269,7 +269,9 @@ def test_diagnostics_report_depth_error_and_mesh_agreement(tiny_scene):
     for _ in range(3):
         tr.step()
     d = tr.diagnostics(tr.extract_mesh(32))
-    assert {"beta", "loss_color", "loss_eikonal", "depth_err_median", "mesh_ahead_frac", "sampler_gap_median"} <= set(d)
+    assert {"beta", "loss_color", "loss_eikonal", "depth_err_median", "mesh_ahead_frac", "sampler_gap_median",
+            "samples_weighted", "edge_px_frac", "depth_err_interior_median", "depth_fit_scale_iqr"} <= set(d)
+    assert 0 < d["samples_weighted"] <= tr.cfg["n_coarse"] + tr.cfg["n_fine"]
     assert all(np.isfinite(v) for v in d.values())
     assert 0.0 <= d["mesh_ahead_frac"] <= 1.0 and d["depth_err_median"] >= 0.0
     assert "loss_color" not in tr.diagnostics()  # averages reset at each call
