@@ -44,6 +44,14 @@ class StudyRun:
     overrides: dict[str, Any]
     exact_priors: bool
     sweep_value: Any = None
+    sweep_key: str | None = None
+    mesh_dir: str | None = None  # the final snapshot's mesh is written here (world metres, PLY)
+
+    @property
+    def mesh_name(self) -> str:
+        """File name of the final mesh: ``<key>=<value>_seed<seed>.ply`` (``run_seed<seed>.ply`` without a sweep)."""
+        tag = f"{self.sweep_key}={json.dumps(self.sweep_value)}" if self.sweep_key else "run"
+        return f"{tag}_seed{self.seed}.ply".replace("/", "_").replace(" ", "")
 
 
 def parse_value(text: str) -> Any:
@@ -122,6 +130,11 @@ def run_one(run: StudyRun, snapshots: int) -> list[dict[str, Any]]:
             rec["error"] = str(exc)
         rec.update({k: v for k, v in snap.diagnostics.items() if isinstance(v, (int, float))})
         records.append(rec)
+    last = artifacts.snapshots[-1].mesh if artifacts.snapshots else None
+    if run.mesh_dir and last is not None and len(last.faces):
+        path = Path(run.mesh_dir) / run.mesh_name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_bytes(path, last.export(file_type="ply", encoding="binary"))
     return records
 
 
@@ -219,7 +232,9 @@ def run_study(method: str, scene: str, scale: str, seeds: list[int], overrides: 
     key, values = parse_sweep(sweep)
     method_config(method, scale, {**overrides, **({key: values[0]} if key else {})})  # unknown keys: one clear error, before any work
     load_study_scene(scene, scale, exact_priors)  # bad scene: fail now (and synthesise it once, before the workers)
-    runs = [StudyRun(method, scene, scale, int(s), {**overrides, **({key: v} if key else {})}, exact_priors, v) for v in values for s in seeds]
+    mesh_dir = str(Path(out_dir) / "meshes")
+    runs = [StudyRun(method, scene, scale, int(s), {**overrides, **({key: v} if key else {})}, exact_priors, v, key, mesh_dir)
+            for v in values for s in seeds]
     workers = max(1, min(workers or os.cpu_count() or 1, len(runs)))
     log(f"[study] {method} on {scene} ({scale}{', exact priors' if exact_priors else ''}): {len(runs)} runs "
         f"({len(values)} value(s) x {len(seeds)} seed(s)), {snapshots} snapshots each, {workers} worker(s)")

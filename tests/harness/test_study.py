@@ -38,6 +38,8 @@ def test_study_cli_writes_curves_with_diagnostics(tmp_path):
     assert (out / "study.png").stat().st_size > 1000
     md = (out / "study.md").read_text()
     assert "appearance_dim" in md and "flat" in md
+    meshes = sorted(p.name for p in (out / "meshes").glob("*.ply"))  # the final mesh of every run, to look at
+    assert meshes == ["appearance_dim=0_seed0.ply", "appearance_dim=8_seed0.ply"]
 
 
 def test_study_bad_key_is_one_clear_error(tmp_path, capsys):
