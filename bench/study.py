@@ -257,7 +257,7 @@ def run_study(method: str, scene: str, scale: str, seeds: list[int], overrides: 
             records.extend(recs)
             last = recs[-1]
             f_str = ", ".join(f"{x.get('fscore', float('nan')):.3f}" for x in recs)
-            log(f"[study] {key}={r.sweep_value} seed {r.seed}: F along the schedule {f_str}; "
+            log(f"[study] {f'{key}={r.sweep_value} ' if key else ''}seed {r.seed}: F along the schedule {f_str}; "
                 f"depth err {last.get('depth_err_median', float('nan')):.4f} m; beta {last.get('beta', float('nan')):.4f}; "
                 f"{last['fit_seconds']:.0f} s ({time.perf_counter() - t0:.0f} s elapsed)")
             df = _write_outputs(records, values, key, out_dir, title, seeds, snapshots)  # after every run: a partial study is readable
