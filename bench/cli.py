@@ -242,7 +242,7 @@ def cmd_study_convergence(args: argparse.Namespace) -> int:
     overrides = parse_overrides(args.set)
     out = Path(args.out) if args.out else DEFAULT_OUT / "studies" / f"{args.method}-{Path(args.scene).name}-{args.scale}"
     run_study(args.method, args.scene, args.scale, list(args.seeds), overrides, args.sweep, args.exact_priors, int(args.snapshots),
-              out, workers=args.workers)
+              out, workers=args.workers, stop_at=float(args.stop_at))
     return 0
 
 
@@ -308,6 +308,8 @@ def build_parser() -> argparse.ArgumentParser:
     conv.add_argument("--set", nargs="+", default=None, metavar="KEY=VALUE", help="config overrides (YAML values)")
     conv.add_argument("--sweep", default=None, metavar="KEY=V1,V2,...", help="repeat the study for each value of one config key")
     conv.add_argument("--workers", type=int, default=None, help="parallel runs (default: one single-threaded run per core)")
+    conv.add_argument("--stop-at", type=float, default=1.0, metavar="FRACTION",
+                      help="stop every run at this fraction of its schedule (same lr schedule): a cheap screen of the early phase")
     conv.add_argument("--out", default=None, help="output folder (default results/runs/studies/METHOD-SCENE-SCALE)")
     conv.set_defaults(func=cmd_study_convergence)
     return p

@@ -105,14 +105,17 @@ def load_study_scene(scene: str, scale: str, exact_priors: bool) -> Any:
     return sc
 
 
-def run_one(run: StudyRun, snapshots: int) -> list[dict[str, Any]]:
-    """Train ``run`` with ``snapshots`` evenly spaced snapshots and evaluate each -> one record per snapshot."""
+def run_one(run: StudyRun, snapshots: int, stop_at: float = 1.0) -> list[dict[str, Any]]:
+    """Train ``run`` with ``snapshots`` evenly spaced snapshots and evaluate each -> one record per snapshot.
+
+    ``stop_at`` < 1 stops training after the snapshot at that fraction of the schedule (the learning-rate
+    schedule is the full run's): a cheap screen of the early phase over many seeds, not a result."""
     from bench.evaluate import evaluate_snapshot
     from methods.registry import get_method, method_config
 
     scene = load_study_scene(run.scene, run.scale, run.exact_priors)
     protocol = scene.source_format  # each on-disk format has its protocol of the same name (bench/evaluate.py)
-    fractions = [round((i + 1) / snapshots, 6) for i in range(snapshots)]
+    fractions = [f for f in (round((i + 1) / snapshots, 6) for i in range(snapshots)) if f <= stop_at + 1e-9]
     overrides = {"fractions": fractions, **run.overrides}
     cfg = method_config(run.method, run.scale, overrides)
     if "diag_views" in cfg and not int(cfg["diag_views"]):
@@ -223,12 +226,15 @@ def plot_study(df: pd.DataFrame, title: str) -> bytes:
 
 def run_study(method: str, scene: str, scale: str, seeds: list[int], overrides: dict[str, Any], sweep: str | None,
               exact_priors: bool, snapshots: int, out_dir: Path, workers: int | None = None,
-              log: Callable[[str], None] = print) -> pd.DataFrame:
-    """Run every (sweep value x seed), write study.csv / study.png / study.md into ``out_dir``; returns the records."""
+              log: Callable[[str], None] = print, stop_at: float = 1.0) -> pd.DataFrame:
+    """Run every (sweep value x seed), write study.csv / study.png / study.md into ``out_dir``; returns the
+    records. ``stop_at`` < 1: every run stops at that fraction of its schedule (see :func:`run_one`)."""
     from methods.registry import method_config
 
     if snapshots < 2:
         raise BenchInputError("--snapshots", f"need at least 2 snapshots, got {snapshots}")
+    if not 1.0 / snapshots <= stop_at <= 1.0:
+        raise BenchInputError("--stop-at", f"must lie in [1 / snapshots, 1] = [{1.0 / snapshots:g}, 1], got {stop_at:g}")
     key, values = parse_sweep(sweep)
     method_config(method, scale, {**overrides, **({key: values[0]} if key else {})})  # unknown keys: one clear error, before any work
     load_study_scene(scene, scale, exact_priors)  # bad scene: fail now (and synthesise it once, before the workers)
@@ -250,7 +256,7 @@ def run_study(method: str, scene: str, scale: str, seeds: list[int], overrides: 
     ctx.set_forkserver_preload(FORKSERVER_PRELOAD)
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init)
     try:
-        futures = {pool.submit(run_one, r, snapshots): r for r in runs}
+        futures = {pool.submit(run_one, r, snapshots, stop_at): r for r in runs}
         for fut in as_completed(futures):
             r = futures[fut]
             recs = fut.result()
@@ -260,7 +266,8 @@ def run_study(method: str, scene: str, scale: str, seeds: list[int], overrides: 
             log(f"[study] {f'{key}={r.sweep_value} ' if key else ''}seed {r.seed}: F along the schedule {f_str}; "
                 f"depth err {last.get('depth_err_median', float('nan')):.4f} m; beta {last.get('beta', float('nan')):.4f}; "
                 f"{last['fit_seconds']:.0f} s ({time.perf_counter() - t0:.0f} s elapsed)")
-            df = _write_outputs(records, values, key, out_dir, title, seeds, snapshots)  # after every run: a partial study is readable
+            df = _write_outputs(records, values, key, out_dir, title + (f"; stopped at {stop_at:.0%} of the schedule" if stop_at < 1 else ""),
+                                seeds, snapshots)  # after every run: a partial study is readable
     except BaseException:  # Ctrl-C / SIGTERM / a failed run: stop the running workers too, not only the queue
         for proc in list(getattr(pool, "_processes", {}).values()):
             proc.terminate()

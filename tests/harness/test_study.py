@@ -48,3 +48,15 @@ def test_study_bad_key_is_one_clear_error(tmp_path, capsys):
     assert rc == 2
     assert "no_such_key" in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
+
+
+def test_stop_at_trains_only_the_early_part_of_the_same_schedule(tmp_path):
+    out = tmp_path / "screen"
+    rc = main(["study", "convergence", "monosdf", "scannet_like_tiny", "--scale", "tiny", "--seeds", "0", "--snapshots", "4",
+               "--stop-at", "0.5", "--exact-priors", "--workers", "1", "--set", "iterations=8", "rays_per_batch=64",
+               "mesh_resolution=32", "--out", str(out)])
+    assert rc == 0
+    df = pd.read_csv(out / "study.csv")
+    assert list(df["iterations"]) == [2, 4] and list(df["fraction"]) == [0.25, 0.5]
+    assert "stopped at 50%" in (out / "study.md").read_text()
+    assert main(["study", "convergence", "monosdf", "scannet_like_tiny", "--stop-at", "0.01", "--out", str(out)]) == 2
