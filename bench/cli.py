@@ -148,7 +148,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     if len(names) > 1:
         print(f"{len(todo)} distinct jobs for {len(every)} table cells x seeds ({len(every) - len(todo)} shared between tables)")
     with _executor(args) as executor:
-        rows = run_jobs(todo, out, force=args.force, show_progress=not args.quiet, executor=executor)
+        rows = run_jobs(todo, out, force=args.force, show_progress=not args.quiet, executor=executor,
+                        keep_artifacts=not args.no_artifacts)
     failed = [r for r in rows if r.get("status") != "ok"]
     status = EXIT_JOBS_FAILED if failed else 0
     if failed:
@@ -272,6 +273,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", default=str(DEFAULT_OUT), help="results folder (a sub-folder per scale)")
     run.add_argument("--force", action="store_true", help="rerun jobs whose results exist")
     run.add_argument("--quiet", action="store_true", help="no progress bars")
+    run.add_argument("--no-artifacts", action="store_true",
+                     help="do not keep each job's mesh / uncertainty maps / renders under OUT/SCALE/artifacts/")
     _add_executor_flags(run)
     run.set_defaults(func=cmd_run)
 

@@ -49,6 +49,7 @@ class Job:
     plan: JobPlan
     config: dict[str, Any]
     job_id: str
+    artifact_root: str | None = None  # write the job's mesh / maps under <root>/<job_id>/ (not part of the id)
 
 
 def method_metrics(extra: dict[str, Any]) -> dict[str, float]:
@@ -192,6 +193,8 @@ def run_job(job: Job, cache_dir: Path = DEFAULT_CACHE, progress: Callable[[float
         final = dict(curve[-1]["metrics"]) if curve else {}
         final.update(method_metrics(artifacts.extra))
         row.update(status="ok", error=None, metrics=final, curve=curve, iterations=artifacts.iterations, extra=artifacts.extra)
+        if job.artifact_root:
+            row["artifacts"] = _keep_artifacts(artifacts, scene, job)
     except Exception as exc:  # recorded in the row: the table marks it failed instead of dropping it
         row.update(status="failed", metrics={}, curve=[], iterations=0,
                    error={"type": type(exc).__name__, "message": str(exc), "traceback": traceback.format_exc()})
@@ -224,6 +227,7 @@ def run_jobs(
     force: bool = False,
     show_progress: bool = True,
     executor: "Executor | None" = None,
+    keep_artifacts: bool = True,
 ) -> list[dict[str, Any]]:
     """Plan -> executor -> write each result atomically as it arrives.
 
@@ -231,7 +235,8 @@ def run_jobs(
     on ``executor`` (default: :class:`~bench.executors.local.LocalExecutor` with one worker, in this
     process; jobs that train first, see :func:`training_first`), writes each row to
     ``<out_dir>/jobs/<job_id>.json`` the moment the executor reports it, and shows progress (jobs done /
-    running / failed). Jobs with the same id run once.
+    running / failed). Jobs with the same id run once. With ``keep_artifacts`` each job also writes its
+    final mesh / uncertainty maps / renders to ``<out_dir>/artifacts/<job_id>/`` (:mod:`bench.artifacts`).
 
     Returns:
         The result rows of all jobs (stored or freshly computed), in job order.
@@ -247,6 +252,10 @@ def run_jobs(
         if j.job_id not in by_id and needs_run(result_path(out_dir, j), force):
             by_id[j.job_id] = j
     todo = training_first(list(by_id.values()))
+    if keep_artifacts:  # meshes / maps under <out_dir>/artifacts/<job_id>/ (bench.artifacts)
+        from dataclasses import replace
+
+        todo = [replace(j, artifact_root=str(Path(out_dir) / "artifacts")) for j in todo]
     fresh: dict[str, dict[str, Any]] = {}
     done = failed = retried = running = 0
 
@@ -319,6 +328,18 @@ def run_jobs(
             row = json.loads(path.read_text())
         rows.append(row)
     return rows
+
+
+def _keep_artifacts(artifacts: Any, scene: Any, job: Job) -> dict[str, Any]:
+    """Write the job's artifacts (bench.artifacts); a failure to write them is noted, not fatal."""
+    from bench.artifacts import artifact_dir, write_job_artifacts
+
+    assert job.artifact_root is not None
+    folder = artifact_dir(Path(job.artifact_root), job.job_id)
+    try:
+        return {"dir": f"artifacts/{job.job_id}", "files": write_job_artifacts(artifacts, scene, folder)}
+    except OSError as exc:
+        return {"dir": None, "files": [], "error": f"{type(exc).__name__}: {exc}"}
 
 
 def _describe(job: Job | None) -> str:

@@ -41,6 +41,8 @@ def test_run_ablation_tiny_writes_table_with_oracle_row(tiny_run, capsys):
     assert m["acc"] < 0.02 and m["comp"] < 0.03
     assert set(oracle[0]["timings"]) >= {"data", "train", "eval", "total"}
     assert [c["fraction"] for c in oracle[0]["curve"]] == [0.25, 0.5, 1.0]
+    art = oracle[0]["artifacts"]  # the final mesh is kept beside the numbers
+    assert art["files"] == ["mesh.ply"] and (out / art["dir"] / "mesh.ply").stat().st_size > 1000
 
 
 def test_rerun_skips_finished_jobs(tiny_run):
