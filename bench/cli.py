@@ -7,6 +7,8 @@
     bench regress --table NAME [--scale small] [--update-reference]
                                                  fresh run vs results/reference/<scale>/<table>.json
     bench report [--out DIR]                     rebuild every table from stored results
+    bench fit METHOD PATH [--scale S] [--set K=V] [--out DIR]
+                                                 one method on your own dataset folder; metrics where GT exists
     bench study convergence METHOD SCENE [--seeds 0 1 2] [--snapshots 8] [--exact-priors]
               [--set KEY=VALUE ...] [--sweep KEY=V1,V2] [--out DIR]
                                                  F-score / depth error / beta / losses along the schedule
@@ -247,6 +249,17 @@ def cmd_study_convergence(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_fit(args: argparse.Namespace) -> int:
+    from bench.fit import fit_folder
+    from bench.study import parse_overrides
+
+    if args.seed < 0:
+        raise BenchInputError("--seed", f"must be a non-negative integer, got {args.seed}")
+    out = Path(args.out) if args.out else DEFAULT_OUT / "fit" / f"{args.method}-{Path(args.path).resolve().name}-{args.scale}"
+    fit_folder(args.method, Path(args.path), args.scale, parse_overrides(args.set), out, seed=args.seed, factor=args.factor)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     from bench.synth.recipe import SCALES
 
@@ -299,6 +312,16 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--scale", default="small", choices=SCALES)
     rep.add_argument("--out", default=str(DEFAULT_OUT))
     rep.set_defaults(func=cmd_report)
+
+    fit = sub.add_parser("fit", help="one method on your own dataset folder (any of the four formats); metrics where GT is present")
+    fit.add_argument("method", help="a registered method (bench list)")
+    fit.add_argument("path", help="dataset folder: MonoSDF ScanNet / Replica layout, IDR DTU layout or LLFF")
+    fit.add_argument("--scale", default="small", choices=SCALES, help="the method's schedule preset")
+    fit.add_argument("--set", nargs="+", default=None, metavar="KEY=VALUE", help="config overrides (YAML values)")
+    fit.add_argument("--seed", type=int, default=0)
+    fit.add_argument("--factor", type=int, default=None, help="LLFF: read images_FACTOR")
+    fit.add_argument("--out", default=None, help="output folder (default results/runs/fit/METHOD-FOLDER-SCALE)")
+    fit.set_defaults(func=cmd_fit)
 
     study = sub.add_parser("study", help="studies of one method on one scene").add_subparsers(dest="study_command", required=True)
     conv = study.add_parser("convergence", help="metrics, depth error, beta and losses along the schedule (dense snapshots), over seeds")
