@@ -35,6 +35,12 @@ REFERENCE_DIR = REPO_ROOT / "results" / "reference"
 
 
 def _table_path(name: str) -> Path:
+    """A shipped table by name (``configs/tables/<name>.yaml``) or a user's own table spec by path (``*.yaml``)."""
+    if name.endswith((".yaml", ".yml")):
+        own = Path(name)
+        if not own.is_file():
+            raise BenchInputError(own, "table spec file does not exist")
+        return own
     path = TABLES_DIR / f"{name}.yaml"
     if not path.exists():
         from bench.tables import list_tables
@@ -137,10 +143,11 @@ def cmd_run(args: argparse.Namespace) -> int:
         plans = select_plans(spec, plan_jobs(spec, args.scale), args.rows, args.scenes, args.seeds)
         jobs, pending = resolve_jobs(plans)
         pending_methods = sorted({p.method for p in pending})
-        print(f"table {name}: {len(jobs)} jobs at scale {args.scale!r}"
+        print(f"table {spec.name}: {len(jobs)} jobs at scale {args.scale!r}"
               + (f"; pending (not implemented yet): {', '.join(pending_methods)}" if pending_methods else ""))
         specs.append(spec)
-        jobs_by_table[name] = jobs
+        jobs_by_table[spec.name] = jobs  # by the spec's name: a table given by path is named inside its file
+    names = list(jobs_by_table)
     every = [j for name in names for j in jobs_by_table[name]]
     todo = unique_jobs(every)
     if not todo:
@@ -278,7 +285,7 @@ def build_parser() -> argparse.ArgumentParser:
     make.set_defaults(func=cmd_scenes_make)
 
     run = sub.add_parser("run", help="run a table's jobs and write its CSV, markdown and plot")
-    run.add_argument("--table", required=True, nargs="+", help="table name(s) from configs/tables/, or 'all'")
+    run.add_argument("--table", required=True, nargs="+", help="table name(s) from configs/tables/, a path to your own table spec (.yaml), or 'all'")
     run.add_argument("--scale", default="small", choices=SCALES)
     run.add_argument("--rows", nargs="+", default=None, help="restrict to these row labels")
     run.add_argument("--scenes", nargs="+", default=None, help="restrict to these scenes")

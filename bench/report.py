@@ -467,7 +467,7 @@ def to_markdown(report: TableReport, heading_level: int = 2) -> str:
         "",
         f"Bold rows: measured here, mean ± std over seeds (std: sample std, ddof=1, of the per-seed means "
         f"over scenes; none with one seed); `(k/N, ...)` marks cells with fewer than N scene x seed results. "
-        f"Rows in *italics marked paper* are the values published in the paper ({spec.paper_table}), "
+        f"Rows in *italics marked paper* are the values published in the paper{f' ({spec.paper_table})' if spec.paper_table else ''}, "
         f"not measured here; '-' = not published. Time: mean total wall seconds per job.",
     ]
     if spec.notes:

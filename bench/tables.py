@@ -467,8 +467,8 @@ def parse_table_spec(obj: Any, where: str | Path = "<table spec>") -> TableSpec:
     """Validate an already-loaded YAML mapping; errors name ``where`` and the key path."""
     ctx = _Ctx(where)
     d = ctx.mapping(
-        obj, "", {"name", "title", "paper_table", "datasets", "seeds", "rows"},
-        {"paper_only_rows", "claims", "notes", "main_metric", "anchors"},
+        obj, "", {"name", "title", "datasets", "seeds", "rows"},
+        {"paper_table", "paper_only_rows", "claims", "notes", "main_metric", "anchors"},
     )
     name = ctx.string(d["name"], "name", pattern=True)
     if isinstance(where, Path) and where.suffix in (".yaml", ".yml") and where.stem != name:
@@ -514,7 +514,7 @@ def parse_table_spec(obj: Any, where: str | Path = "<table spec>") -> TableSpec:
     return TableSpec(
         name=name,
         title=ctx.string(d["title"], "title"),
-        paper_table=ctx.string(d["paper_table"], "paper_table"),
+        paper_table=ctx.string(d["paper_table"], "paper_table") if "paper_table" in d else "",  # a user's own table may have none
         groups=groups,
         seeds=seeds,
         rows=rows,

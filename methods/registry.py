@@ -29,9 +29,38 @@ def register(name: str) -> Callable[[type], type]:
     return deco
 
 
+PLUGIN_GROUP = "monoinstance_bench.methods"
+_PLUGIN_CONFIGS: dict[str, Path] = {}
+_plugins_loaded = False
+
+
 def _load_builtins() -> None:
     for mod in _BUILTIN_MODULES:
         importlib.import_module(mod)
+    _load_plugins()
+
+
+def _load_plugins() -> None:
+    """Methods from installed packages: every entry point of the group :data:`PLUGIN_GROUP`
+    (``name = "package.module:Class"``) registers ``Class`` under ``name``; the class says where its
+    config lives (``config_path``: a YAML of the same shape as ``configs/methods/*.yaml``). Example:
+    ``examples/plugin_method`` (README, "Your own method")."""
+    global _plugins_loaded
+    if _plugins_loaded:
+        return
+    _plugins_loaded = True
+    from importlib.metadata import entry_points
+
+    for ep in entry_points(group=PLUGIN_GROUP):
+        try:
+            cls = ep.load()
+        except Exception as exc:  # a broken plugin must name itself, not crash the harness with a traceback
+            raise BenchInputError(f"plugin {ep.name!r} ({ep.value})", f"cannot be loaded: {type(exc).__name__}: {exc}") from None
+        config = getattr(cls, "config_path", None)
+        if config is None or not Path(config).is_file():
+            raise BenchInputError(f"plugin {ep.name!r} ({ep.value})", f"needs a config_path attribute naming its YAML config, got {config!r}")
+        register(ep.name)(cls)
+        _PLUGIN_CONFIGS[ep.name] = Path(config)
 
 
 def available_methods() -> list[str]:
@@ -49,8 +78,10 @@ def get_method(name: str) -> Any:
 
 
 def _read_config(name: str, config_dir: Path) -> tuple[Path, dict[str, Any], dict[str, Any]]:
-    """(path, defaults, scales) of ``configs/methods/<name>.yaml``, with ``base:`` inheritance resolved."""
-    path = config_dir / f"{name}.yaml"
+    """(path, defaults, scales) of ``configs/methods/<name>.yaml`` (a plugin's own ``config_path``), with
+    ``base:`` inheritance resolved."""
+    _load_plugins()
+    path = _PLUGIN_CONFIGS.get(name) or config_dir / f"{name}.yaml"
     if not path.exists():
         raise BenchInputError(path, f"no config file for method {name!r}")
     data = yaml.safe_load(path.read_text()) or {}

@@ -1,0 +1,72 @@
+"""A method from an installed package (entry point group ``monoinstance_bench.methods``): the example
+plugin in ``examples/plugin_method`` is installed into a temporary site folder (the layout pip writes: the
+package plus a ``.dist-info`` with ``entry_points.txt``), appears in ``bench list`` and runs in a tiny
+table given by path."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import pytest
+
+import methods.registry as registry
+from bench.cli import main
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture()
+def installed_plugin(tmp_path, monkeypatch):
+    site = tmp_path / "site"
+    shutil.copytree(REPO / "examples" / "plugin_method" / "bench_example_method", site / "bench_example_method")
+    info = site / "bench_example_method-0.1.0.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: bench-example-method\nVersion: 0.1.0\n")
+    (info / "entry_points.txt").write_text("[monoinstance_bench.methods]\nmetric_prior_tsdf = bench_example_method:MetricPriorTSDF\n")
+    monkeypatch.syspath_prepend(str(site))
+    monkeypatch.setattr(registry, "_plugins_loaded", False)
+    yield site
+    registry._REGISTRY.pop("metric_prior_tsdf", None)
+    registry._PLUGIN_CONFIGS.pop("metric_prior_tsdf", None)
+    sys.modules.pop("bench_example_method", None)
+
+
+def test_plugin_method_is_listed_and_runs_in_a_table_given_by_path(installed_plugin, tmp_path, capsys):
+    assert main(["list"]) == 0
+    assert "metric_prior_tsdf" in capsys.readouterr().out
+    table = tmp_path / "mine.yaml"
+    table.write_text("""
+name: mine
+title: "My table: a metric-prior TSDF against the oracle"
+datasets:
+  - id: scannet
+    label: ScanNet-like
+    dataset: scannet
+    protocol: scannet
+    scenes: {tiny: [scannet_like_tiny]}
+    columns:
+      - {key: fscore, label: F-score, direction: higher, unit: "", fmt: ".3f"}
+seeds: {tiny: [0]}
+rows:
+  - {label: "Oracle", method: oracle_tsdf, paper: null}
+  - {label: "Metric prior TSDF (plugin)", method: metric_prior_tsdf, paper: null}
+""")
+    out = tmp_path / "runs"
+    assert main(["run", "--table", str(table), "--scale", "tiny", "--out", str(out), "--quiet", "--no-artifacts"]) == 0
+    md = (out / "tiny" / "mine.md").read_text()
+    assert "Metric prior TSDF (plugin)" in md and "2 ok, 0 failed, 0 pending" in md
+    rows = [json.loads(p.read_text()) for p in (out / "tiny" / "jobs").glob("*.json")]
+    plugin = [r for r in rows if r["method"] == "metric_prior_tsdf"]
+    assert plugin and plugin[0]["status"] == "ok" and 0.0 <= plugin[0]["metrics"]["fscore"] <= 1.0
+    assert not (out / "tiny" / "artifacts").exists()  # --no-artifacts
+
+
+def test_a_broken_plugin_is_one_clear_error(installed_plugin, capsys):
+    (installed_plugin / "bench_example_method-0.1.0.dist-info" / "entry_points.txt").write_text(
+        "[monoinstance_bench.methods]\nbroken = bench_example_method:NoSuchClass\n")
+    assert main(["list"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "plugin 'broken'" in err[0] and "NoSuchClass" in err[0]
