@@ -2,6 +2,7 @@
 
     bench list                                   methods, tables, scenes
     bench scenes make RECIPE --out DIR           synthesise a scene into a dataset folder
+    bench scenes downsize SRC DST --factor N     a dataset folder at 1/N of its image size, same format
     bench run --table NAME [--scale small] ...   run a table's jobs, write CSV / markdown / plot
               [--executor local|dask] [--workers N] [--scheduler tcp://HOST:PORT] [--retries R]
     bench regress --table NAME [--scale small] [--update-reference]
@@ -256,6 +257,14 @@ def cmd_study_convergence(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_scenes_downsize(args: argparse.Namespace) -> int:
+    from bench.formats.downsize import downsize_folder
+
+    small = downsize_folder(Path(args.src), Path(args.dst), int(args.factor), overwrite=args.overwrite)
+    print(f"wrote {args.dst} ({small.source_format}, {small.num_views} views {small.width}x{small.height})")
+    return 0
+
+
 def cmd_fit(args: argparse.Namespace) -> int:
     from bench.fit import fit_folder
     from bench.study import parse_overrides
@@ -283,6 +292,12 @@ def build_parser() -> argparse.ArgumentParser:
     make.add_argument("--seed", type=int, default=None, help="override the recipe's seed")
     make.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
     make.set_defaults(func=cmd_scenes_make)
+    down = scenes.add_parser("downsize", help="a dataset folder at 1/FACTOR of its image size, in the same format (real data to CPU scale)")
+    down.add_argument("src", help="dataset folder (ScanNet / Replica / DTU / LLFF layout)")
+    down.add_argument("dst", help="output folder (written atomically)")
+    down.add_argument("--factor", type=int, required=True)
+    down.add_argument("--overwrite", action="store_true")
+    down.set_defaults(func=cmd_scenes_downsize)
 
     run = sub.add_parser("run", help="run a table's jobs and write its CSV, markdown and plot")
     run.add_argument("--table", required=True, nargs="+", help="table name(s) from configs/tables/, a path to your own table spec (.yaml), or 'all'")
