@@ -629,10 +629,11 @@ def plot_accuracy_vs_time(report: TableReport, curves: pd.DataFrame | None = Non
     return buf.getvalue()
 
 
-def write_table_outputs(report: TableReport, out_dir: str | Path) -> dict[str, Path]:
+def write_table_outputs(report: TableReport, out_dir: str | Path, figures: bool = True) -> dict[str, Path]:
     """Write ``<table>.csv``, ``<table>_time.csv``, ``<table>_curve.csv`` (accuracy along the schedule,
     :func:`curve_table`), ``<table>.md`` and ``<table>_accuracy_vs_time.png`` atomically into
-    ``out_dir``; returns the paths by kind."""
+    ``out_dir``; with ``figures`` and kept meshes also ``<table>_reconstructions.png``
+    (:func:`bench.figures.reconstruction_figure`), embedded in the markdown. Returns the paths by kind."""
     out, name = Path(out_dir), report.spec.name
     paths = {"csv": out / f"{name}.csv", "time_csv": out / f"{name}_time.csv", "curve_csv": out / f"{name}_curve.csv",
              "md": out / f"{name}.md", "png": out / f"{name}_accuracy_vs_time.png"}
@@ -640,8 +641,18 @@ def write_table_outputs(report: TableReport, out_dir: str | Path) -> dict[str, P
     atomic_write_text(paths["time_csv"], report.timing.to_csv(index=False))
     curves = curve_table(report)
     atomic_write_text(paths["curve_csv"], curves.to_csv(index=False))
+    from bench.figures import reconstruction_figure
+
+    recon = reconstruction_figure(report, out) if figures else None
+    extra = ""
+    if recon is not None:
+        paths["recon_png"] = out / f"{name}_reconstructions.png"
+        atomic_write_bytes(paths["recon_png"], recon)
+        extra = (f"\n![reconstructions: distance to GT]({paths['recon_png'].name})\n\n"
+                 "Reconstructions (first scene, first seed of each group, from 2 training cameras): each pixel "
+                 "coloured by the distance of the surface it sees to the GT mesh (0-10 cm; grey: no surface).\n")
     atomic_write_text(paths["md"], to_markdown(report, heading_level=1)
-                      + f"\n![accuracy vs time]({paths['png'].name})\n")
+                      + f"\n![accuracy vs time]({paths['png'].name})\n" + extra)
     atomic_write_bytes(paths["png"], plot_accuracy_vs_time(report, curves))
     return paths
 
@@ -665,8 +676,10 @@ def render_report(specs: Sequence[TableSpec], df: pd.DataFrame, scale: str, out_
                         f"Versions: {', '.join(versions) or 'not recorded'}.")
     sections += ["", "Tables:"] + [f"- [{r.spec.title}]({r.spec.name}.md)" for r in reports] + [""]
     for r in reports:
-        write_table_outputs(r, out)
+        paths = write_table_outputs(r, out)
         sections += [to_markdown(r, heading_level=2), f"![accuracy vs time]({r.spec.name}_accuracy_vs_time.png)", ""]
+        if "recon_png" in paths:
+            sections += [f"![reconstructions: distance to GT]({paths['recon_png'].name})", ""]
     path = out / "report.md"
     atomic_write_text(path, "\n".join(sections))
     return path

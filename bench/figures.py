@@ -1,0 +1,130 @@
+"""Report figures drawn from the per-job artifacts (:mod:`bench.artifacts`).
+
+:func:`reconstruction_figure`: for every geometry group of a table, one scene (its first) and one seed
+(the smallest), every measured row's final mesh ray-cast from 2 fixed training cameras, each pixel
+coloured by the distance of the surface point it sees to the GT mesh (0 .. ``VMAX_M``; grey = the mesh
+has no surface there), beside the GT mesh seen from the same cameras (shaded by its normals). What a
+table's F-score summarises, where it goes wrong.
+"""
+
+from __future__ import annotations
+
+import io
+import textwrap
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+VMAX_M = 0.10  # colour scale of the distance to GT (m): the F-score threshold is 5 cm
+GEOMETRY_PROTOCOLS = ("scannet", "replica", "dtu")
+
+
+def _backproject(depth: np.ndarray, K: np.ndarray, c2w: np.ndarray) -> np.ndarray:
+    """(H, W) z-depth (m) -> (H, W, 3) world points (OpenCV camera, pixel centres at integers)."""
+    h, w = depth.shape
+    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    rays = np.stack([u, v, np.ones_like(u)], -1) @ np.linalg.inv(K).T
+    cam = rays * depth[..., None]
+    return cam @ c2w[:3, :3].T + c2w[:3, 3]
+
+
+def distance_image(mesh: Any, gt_mesh: Any, K: np.ndarray, c2w: np.ndarray, h: int, w: int) -> np.ndarray:
+    """(H, W) distance (m) from the surface of ``mesh`` seen at each pixel to ``gt_mesh``; NaN where the
+    ray hits nothing."""
+    import open3d as o3d
+
+    from metrics.culling import render_depth_maps
+
+    depth = render_depth_maps(mesh, K[None], c2w[None], h, w)[0]
+    pts = _backproject(depth, K, c2w)
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(np.asarray(gt_mesh.vertices, np.float32)), o3d.core.Tensor(np.asarray(gt_mesh.faces, np.uint32)))
+    d = scene.compute_distance(o3d.core.Tensor(pts.reshape(-1, 3).astype(np.float32))).numpy().reshape(h, w)
+    return np.where(depth > 0, d, np.nan)
+
+
+def shaded_image(mesh: Any, K: np.ndarray, c2w: np.ndarray, h: int, w: int) -> np.ndarray:
+    """(H, W) grey shading |n . view ray| of ``mesh`` (0 where nothing is hit)."""
+    import open3d as o3d
+
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(np.asarray(mesh.vertices, np.float32)), o3d.core.Tensor(np.asarray(mesh.faces, np.uint32)))
+    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    dirs = np.stack([u, v, np.ones_like(u)], -1) @ np.linalg.inv(K).T @ c2w[:3, :3].T
+    dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
+    rays = np.concatenate([np.broadcast_to(c2w[:3, 3], dirs.shape), dirs], -1).reshape(-1, 6).astype(np.float32)
+    ans = scene.cast_rays(o3d.core.Tensor(rays))
+    n = ans["primitive_normals"].numpy().reshape(h, w, 3)
+    hit = np.isfinite(ans["t_hit"].numpy().reshape(h, w))
+    return np.where(hit, np.abs((n * dirs).sum(-1)), 0.0)
+
+
+def reconstruction_figure(report: Any, out_dir: Path, cache_dir: Path | None = None) -> bytes | None:
+    """PNG (see the module docstring) for ``report`` (a :class:`bench.report.TableReport`) from the meshes
+    under ``out_dir/artifacts``; None when no row of a geometry group has a kept mesh."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import trimesh
+
+    from bench.datasets import DEFAULT_CACHE, load_dataset
+
+    jobs = report.jobs
+    if jobs is None or not len(jobs):
+        return None
+    panels = []  # (group label, scene, rows [(label, mesh path)])
+    for g in report.spec.groups:
+        if g.protocol not in GEOMETRY_PROTOCOLS:
+            continue
+        mine = jobs[(jobs["group"].astype(object) == g.id) & (jobs["status"] == "ok")]
+        if not len(mine):
+            continue
+        scene_name = sorted(mine["scene"].unique())[0]
+        seed = int(mine[mine["scene"] == scene_name]["seed"].min())
+        rows = []
+        for r in report.spec.rows:
+            hit = mine[(mine["row"] == r.label) & (mine["scene"] == scene_name) & (mine["seed"] == seed)]
+            if len(hit):
+                path = Path(out_dir) / "artifacts" / str(hit.iloc[0]["job_id"]) / "mesh.ply"
+                if path.is_file():
+                    rows.append((r.label, path))
+        if rows:
+            panels.append((g.label, scene_name, rows))
+    if not panels:
+        return None
+    n_rows = sum(1 + len(rows) for _, _, rows in panels)
+    fig, ax = plt.subplots(n_rows, 2, figsize=(7.6, 2.4 * n_rows), squeeze=False)
+    k = 0
+    im = None
+    for label, scene_name, rows in panels:
+        scene = load_dataset(scene_name, report.scale, cache_dir or DEFAULT_CACHE)
+        gt = scene.load_gt_mesh()
+        views = scene.view_indices("train")
+        cams = [int(views[0]), int(views[len(views) // 2])]
+        for j, v in enumerate(cams):
+            ax[k, j].imshow(shaded_image(gt, scene.intrinsics[v], scene.cam_to_world[v], scene.height, scene.width), cmap="gray", vmin=0, vmax=1)
+            ax[k, j].set_title(f"GT, view {v}", fontsize=7)
+        ax[k, 0].set_ylabel(textwrap.fill(f"{label} / {scene_name}", 24), fontsize=7)
+        k += 1
+        for row_label, path in rows:
+            mesh = trimesh.load(path, force="mesh", process=False)
+            for j, v in enumerate(cams):
+                d = distance_image(mesh, gt, scene.intrinsics[v], scene.cam_to_world[v], scene.height, scene.width)
+                ax[k, j].set_facecolor("0.6")
+                im = ax[k, j].imshow(np.clip(d, 0, VMAX_M), cmap="viridis", vmin=0, vmax=VMAX_M)
+                ok = np.isfinite(d)
+                frac = float((d[ok] < 0.05).mean()) if ok.any() else 0.0
+                ax[k, j].set_title(f"view {v}: {100 * frac:.0f} % of pixels < 5 cm", fontsize=7)
+            ax[k, 0].set_ylabel(textwrap.fill(row_label, 24), fontsize=7)
+            k += 1
+    for a in ax.ravel():
+        a.set_xticks([])
+        a.set_yticks([])
+    if im is not None:
+        fig.colorbar(im, ax=ax.ravel().tolist(), shrink=0.3, label="distance to GT (m); grey: no surface")
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=80)
+    plt.close(fig)
+    return buf.getvalue()
