@@ -5,6 +5,13 @@
 coloured by the distance of the surface point it sees to the GT mesh (0 .. ``VMAX_M``; grey = the mesh
 has no surface there), beside the GT mesh seen from the same cameras (shaded by its normals). What a
 table's F-score summarises, where it goes wrong.
+
+:func:`uncertainty_figure`: for every row that kept uncertainty maps (MonoInstance), 3 views of its first
+scene / seed: the image, the estimated uncertainty and the true error of the depth prior
+(|prior aligned to GT by per-view scale + shift - GT depth|, the paper's Figs. 2 / 3 / 6 argument: the
+uncertainty should be high where the prior is wrong).
+
+:func:`renders_figure`: for every view-synthesis row (LLFF), its renders of 3 test views beside the GT.
 """
 
 from __future__ import annotations
@@ -71,27 +78,7 @@ def reconstruction_figure(report: Any, out_dir: Path, cache_dir: Path | None = N
 
     from bench.datasets import DEFAULT_CACHE, load_dataset
 
-    jobs = report.jobs
-    if jobs is None or not len(jobs):
-        return None
-    panels = []  # (group label, scene, rows [(label, mesh path)])
-    for g in report.spec.groups:
-        if g.protocol not in GEOMETRY_PROTOCOLS:
-            continue
-        mine = jobs[(jobs["group"].astype(object) == g.id) & (jobs["status"] == "ok")]
-        if not len(mine):
-            continue
-        scene_name = sorted(mine["scene"].unique())[0]
-        seed = int(mine[mine["scene"] == scene_name]["seed"].min())
-        rows = []
-        for r in report.spec.rows:
-            hit = mine[(mine["row"] == r.label) & (mine["scene"] == scene_name) & (mine["seed"] == seed)]
-            if len(hit):
-                path = Path(out_dir) / "artifacts" / str(hit.iloc[0]["job_id"]) / "mesh.ply"
-                if path.is_file():
-                    rows.append((r.label, path))
-        if rows:
-            panels.append((g.label, scene_name, rows))
+    panels = [(g.label, scene_name, rows) for g, scene_name, _seed, rows in _first_jobs(report, out_dir, "mesh.ply", GEOMETRY_PROTOCOLS)]
     if not panels:
         return None
     n_rows = sum(1 + len(rows) for _, _, rows in panels)
@@ -128,3 +115,113 @@ def reconstruction_figure(report: Any, out_dir: Path, cache_dir: Path | None = N
     fig.savefig(buf, format="png", dpi=80)
     plt.close(fig)
     return buf.getvalue()
+
+
+def _first_jobs(report: Any, out_dir: Path, want: str, protocols: tuple[str, ...] | None = None) -> list[tuple[Any, str, int, list[tuple[str, Path]]]]:
+    """Per group (optionally of these protocols): (group, first scene, smallest seed, [(row label,
+    artifact file ``want``)]) for the rows whose job kept that file."""
+    jobs = report.jobs
+    out = []
+    if jobs is None or not len(jobs):
+        return out
+    for g in report.spec.groups:
+        if protocols and g.protocol not in protocols:
+            continue
+        mine = jobs[(jobs["group"].astype(object) == g.id) & (jobs["status"] == "ok")]
+        if not len(mine):
+            continue
+        scene_name = sorted(mine["scene"].unique())[0]
+        seed = int(mine[mine["scene"] == scene_name]["seed"].min())
+        rows = []
+        for r in report.spec.rows:
+            hit = mine[(mine["row"] == r.label) & (mine["scene"] == scene_name) & (mine["seed"] == seed)]
+            if len(hit):
+                path = Path(out_dir) / "artifacts" / str(hit.iloc[0]["job_id"]) / want
+                if path.is_file():
+                    rows.append((r.label, path))
+        if rows:
+            out.append((g, scene_name, seed, rows))
+    return out
+
+
+def prior_error_maps(scene: Any, views: np.ndarray) -> np.ndarray:
+    """(V, H, W) |mono depth aligned to GT (per-view LSQ scale + shift) - GT depth| (m); NaN where either
+    is invalid or the view cannot be aligned."""
+    from metrics.depth import align_depth
+
+    out = np.full((len(views), scene.height, scene.width), np.nan, dtype=np.float32)
+    for i, v in enumerate(views):
+        prior, gt = scene.mono_depth[v].astype(np.float64), scene.gt_depth[v].astype(np.float64)
+        valid = (prior > 0) & (gt > 0)
+        try:
+            s, t = align_depth(prior, gt, valid)
+        except ValueError:
+            continue
+        out[i] = np.where(valid, np.abs(s * prior + t - gt), np.nan)
+    return out
+
+
+def _grid_png(cells: list[list[tuple[np.ndarray, str, dict[str, Any]]]], ylabels: list[str]) -> bytes:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n_r, n_c = len(cells), max(len(r) for r in cells)
+    fig, ax = plt.subplots(n_r, n_c, figsize=(2.5 * n_c, 2.1 * n_r), squeeze=False)
+    for i, row in enumerate(cells):
+        for j in range(n_c):
+            ax[i, j].set_xticks([])
+            ax[i, j].set_yticks([])
+            if j < len(row):
+                img, title, kw = row[j]
+                ax[i, j].imshow(img, **kw)
+                ax[i, j].set_title(title, fontsize=7)
+        ax[i, 0].set_ylabel(textwrap.fill(ylabels[i], 22), fontsize=7)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=80)
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def uncertainty_figure(report: Any, out_dir: Path, cache_dir: Path | None = None) -> bytes | None:
+    """PNG: image / estimated uncertainty / true prior error for 3 views of every row with kept maps."""
+    from bench.datasets import DEFAULT_CACHE, load_dataset
+
+    cells, labels = [], []
+    for g, scene_name, _seed, rows in _first_jobs(report, out_dir, "uncertainty.npy"):
+        scene = load_dataset(scene_name, report.scale, cache_dir or DEFAULT_CACHE, effects=dict(g.effects) or None)
+        if scene.mono_depth is None or scene.gt_depth is None:
+            continue
+        for label, path in rows:
+            unc = np.load(path).astype(np.float32)
+            views = scene.view_indices("train") if len(unc) != scene.num_views else np.arange(scene.num_views)
+            pick = np.linspace(0, len(unc) - 1, min(3, len(unc))).round().astype(int)
+            err = prior_error_maps(scene, views[pick])
+            for k, i in enumerate(pick):
+                v = int(views[i])
+                cells.append([(scene.images[v], f"{scene_name} view {v}", {}),
+                              (unc[i], "estimated uncertainty", {"cmap": "inferno", "vmin": 0, "vmax": 1}),
+                              (np.clip(err[k], 0, 0.3), "true prior error 0-30 cm", {"cmap": "inferno", "vmin": 0, "vmax": 0.3})])
+                labels.append(f"{g.label}: {label}")
+    return _grid_png(cells, labels) if cells else None
+
+
+def renders_figure(report: Any, out_dir: Path, cache_dir: Path | None = None) -> bytes | None:
+    """PNG: 3 test views of every view-synthesis row, its render beside the GT image."""
+    from bench.datasets import DEFAULT_CACHE, load_dataset
+
+    cells, labels = [], []
+    for g, scene_name, _seed, rows in _first_jobs(report, out_dir, "renders.npy", ("llff",)):
+        scene = load_dataset(scene_name, report.scale, cache_dir or DEFAULT_CACHE)
+        test = scene.view_indices("test")
+        for label, path in rows:
+            renders = np.load(path).astype(np.float32)
+            pick = np.linspace(0, len(renders) - 1, min(3, len(renders))).round().astype(int)
+            row = []
+            for i in pick:
+                row += [(np.clip(renders[i], 0, 1), f"render, test view {int(test[i])}", {}), (scene.images[int(test[i])], "GT", {})]
+            cells.append(row)
+            labels.append(f"{g.label}: {label}")
+    return _grid_png(cells, labels) if cells else None

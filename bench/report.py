@@ -641,16 +641,21 @@ def write_table_outputs(report: TableReport, out_dir: str | Path, figures: bool 
     atomic_write_text(paths["time_csv"], report.timing.to_csv(index=False))
     curves = curve_table(report)
     atomic_write_text(paths["curve_csv"], curves.to_csv(index=False))
-    from bench.figures import reconstruction_figure
+    from bench.figures import reconstruction_figure, renders_figure, uncertainty_figure
 
-    recon = reconstruction_figure(report, out) if figures else None
     extra = ""
-    if recon is not None:
-        paths["recon_png"] = out / f"{name}_reconstructions.png"
-        atomic_write_bytes(paths["recon_png"], recon)
-        extra = (f"\n![reconstructions: distance to GT]({paths['recon_png'].name})\n\n"
-                 "Reconstructions (first scene, first seed of each group, from 2 training cameras): each pixel "
-                 "coloured by the distance of the surface it sees to the GT mesh (0-10 cm; grey: no surface).\n")
+    for kind, make, caption in (
+        ("reconstructions", reconstruction_figure, "Reconstructions (first scene, first seed of each group, from 2 training cameras): "
+         "each pixel coloured by the distance of the surface it sees to the GT mesh (0-10 cm; grey: no surface)."),
+        ("uncertainty", uncertainty_figure, "Estimated uncertainty beside the true error of the depth prior (|prior aligned "
+         "to GT by per-view scale + shift - GT|), 3 views of the first scene and seed."),
+        ("renders", renders_figure, "Test-view renders beside the GT images (first scene and seed)."),
+    ):
+        png = make(report, out) if figures else None
+        if png is not None:
+            paths[f"{kind}_png"] = out / f"{name}_{kind}.png"
+            atomic_write_bytes(paths[f"{kind}_png"], png)
+            extra += f"\n![{kind}]({paths[f'{kind}_png'].name})\n\n{caption}\n"
     atomic_write_text(paths["md"], to_markdown(report, heading_level=1)
                       + f"\n![accuracy vs time]({paths['png'].name})\n" + extra)
     atomic_write_bytes(paths["png"], plot_accuracy_vs_time(report, curves))
@@ -678,8 +683,7 @@ def render_report(specs: Sequence[TableSpec], df: pd.DataFrame, scale: str, out_
     for r in reports:
         paths = write_table_outputs(r, out)
         sections += [to_markdown(r, heading_level=2), f"![accuracy vs time]({r.spec.name}_accuracy_vs_time.png)", ""]
-        if "recon_png" in paths:
-            sections += [f"![reconstructions: distance to GT]({paths['recon_png'].name})", ""]
+        sections += [f"![{k[:-4]}]({p.name})\n" for k, p in paths.items() if k.endswith("_png") and k != "png"]
     path = out / "report.md"
     atomic_write_text(path, "\n".join(sections))
     return path

@@ -43,7 +43,7 @@ def test_run_ablation_tiny_writes_table_with_oracle_row(tiny_run, capsys):
     assert [c["fraction"] for c in oracle[0]["curve"]] == [0.25, 0.5, 1.0]
     art = oracle[0]["artifacts"]  # the final mesh is kept beside the numbers
     assert art["files"] == ["mesh.ply"] and (out / art["dir"] / "mesh.ply").stat().st_size > 1000
-    assert "![reconstructions: distance to GT](ablation_reconstructions.png)" in md  # ... and drawn in the report
+    assert "![reconstructions](ablation_reconstructions.png)" in md  # ... and drawn in the report
     assert (out / "ablation_reconstructions.png").stat().st_size > 5000
 
 

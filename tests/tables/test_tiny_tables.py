@@ -38,6 +38,10 @@ def test_all_tables_tiny(tmp_path):
         assert ", 0 pending of" in status and "## Claims" in md, (t, status)
         assert (out / f"{t}_accuracy_vs_time.png").stat().st_size > 0
         assert f"({t}.md)" in report
+    # figures drawn from the per-job artifacts, embedded in each table and in report.md
+    for fig in ("ablation_reconstructions", "ablation_uncertainty", "dense_reconstructions", "dtu_reconstructions", "llff_renders"):
+        assert (out / f"{fig}.png").stat().st_size > 5000, fig
+        assert f"({fig}.png)" in report and f"({fig}.png)" in (out / f"{fig.split('_')[0]}.md").read_text(), fig
     # the MonoInstance (Full) job of scannet_like_tiny is shared by the ablation, dense and priors tables
     full = next(j for j in planned["ablation"] if j.plan.row == "+Mask Constraint (Full)")
     assert any(j.job_id == full.job_id for j in planned["dense"]) and any(j.job_id == full.job_id for j in planned["priors"])
