@@ -152,7 +152,8 @@ def build_room(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layout:
     if not height_range[0] <= height_range[1] < size[2]:
         raise BenchInputError(recipe.where("cameras", "height"), f"need low <= high < the room height {size[2]:g} m, got {list(height_range)}")
 
-    poses = cams.room_path(size, n_views, rng, height_range=height_range, jitter=jitter)
+    loop = recipe.number("cameras", "loop_radius", scale=scale, default=0.12, lo=0.0, hi=0.45)
+    poses = cams.room_path(size, n_views, rng, height_range=height_range, jitter=jitter, radius_frac=loop)
     clear = [np.array([p[:2, 3] - 0.25, p[:2, 3] + 0.25]) for p in poses]
 
     objects = build_room_shell(size, rng)

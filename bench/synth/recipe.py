@@ -19,6 +19,12 @@ Example (a user's own recipe with their own mesh)::
     effects:
       - {name: prior_profile, profile: sim-omnidata}
       - {name: segmentation_inconsistent}
+
+Room cameras (``cameras:``): ``views`` (int >= 2), ``hfov`` (degrees), ``jitter`` (m, shakiness),
+``height`` ([low, high] m), ``loop_radius`` (the hand-held loop's radii as a fraction of the room size,
+default 0.12: a small loop in the middle of the room, so the views' baselines are short against depths
+of 2-5 m). Object (DTU-like) cameras: ``distance``, ``hfov``, ``train_azimuths``, ``train_elevations``,
+``eval_views``; LLFF-like: ``grid``, ``spacing``, ``hfov``.
 """
 
 from __future__ import annotations
