@@ -12,6 +12,10 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
+import shutil
+import sys
+import uuid
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -67,9 +71,20 @@ def load_dataset(scene_name: str, scale: str, cache_dir: Path = DEFAULT_CACHE,
 
     from bench.synth.recipe import load_recipe
 
-    folder = ensure_dataset(scene_name, scale, cache_dir, effects=effects)
     recipe = load_recipe(recipe_path(scene_name))
-    if recipe.format == "llff":  # the LLFF protocol trains and evaluates on images_N (FSGS: images_8)
-        factors = recipe.get("llff", "factors", scale=scale, default=[2])
-        return load_scene(folder, factor=int(factors[0]))
-    return load_scene(folder)
+    options = {"factor": int(recipe.get("llff", "factors", scale=scale, default=[2])[0])} if recipe.format == "llff" else {}
+    # (the LLFF protocol trains and evaluates on images_N, FSGS: images_8)
+    folder = ensure_dataset(scene_name, scale, cache_dir, effects=effects)
+    try:
+        return load_scene(folder, **options)
+    except BenchInputError as exc:
+        # A cached copy the synthesiser wrote is deterministic and was valid: a file in it was damaged
+        # since (disk, a user). Move it aside and synthesise it again, once.
+        aside = folder.with_name(f".{folder.name}.corrupt-{uuid.uuid4().hex[:8]}")
+        try:
+            os.replace(folder, aside)
+        except FileNotFoundError:  # another worker moved it first
+            pass
+        print(f"warning: cached dataset {folder} is damaged ({exc}); synthesising it again", file=sys.stderr, flush=True)
+        shutil.rmtree(aside, ignore_errors=True)
+        return load_scene(ensure_dataset(scene_name, scale, cache_dir, effects=effects), **options)

@@ -281,3 +281,18 @@ def test_kill_9_of_the_main_process_takes_the_pool_with_it(tmp_path):
             os.killpg(proc.pid, signal.SIGKILL)
         except ProcessLookupError:
             pass
+
+
+def test_a_damaged_cached_dataset_is_synthesised_again(tmp_path, capsys):
+    """A file of a cached dataset damaged after it was written (here: cameras.npz truncated) would fail every
+    job that uses it; the loader moves the copy aside and synthesises it again, once."""
+    from bench.datasets import ensure_dataset, load_dataset
+
+    folder = ensure_dataset("scannet_like_tiny", "tiny", tmp_path)
+    good = load_dataset("scannet_like_tiny", "tiny", tmp_path)
+    data = (folder / "cameras.npz").read_bytes()
+    (folder / "cameras.npz").write_bytes(data[: len(data) // 3])
+    again = load_dataset("scannet_like_tiny", "tiny", tmp_path)
+    assert "damaged" in capsys.readouterr().err
+    assert (again.images == good.images).all() and (folder / "cameras.npz").read_bytes() == data
+    assert not [p for p in tmp_path.iterdir() if ".corrupt-" in p.name]
