@@ -33,7 +33,7 @@ from typing import Any, Iterable, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from bench.atomic import atomic_write_bytes, atomic_write_text
+from bench.atomic import atomic_write_many, atomic_write_text
 from bench.errors import BenchInputError
 from bench.tables import ClaimSpec, DatasetGroup, TableSpec, resolve
 
@@ -637,10 +637,10 @@ def write_table_outputs(report: TableReport, out_dir: str | Path, figures: bool 
     out, name = Path(out_dir), report.spec.name
     paths = {"csv": out / f"{name}.csv", "time_csv": out / f"{name}_time.csv", "curve_csv": out / f"{name}_curve.csv",
              "md": out / f"{name}.md", "png": out / f"{name}_accuracy_vs_time.png"}
-    atomic_write_text(paths["csv"], report.tidy.to_csv(index=False))
-    atomic_write_text(paths["time_csv"], report.timing.to_csv(index=False))
     curves = curve_table(report)
-    atomic_write_text(paths["curve_csv"], curves.to_csv(index=False))
+    files: dict[Path, bytes] = {paths["csv"]: report.tidy.to_csv(index=False).encode(),
+                                paths["time_csv"]: report.timing.to_csv(index=False).encode(),
+                                paths["curve_csv"]: curves.to_csv(index=False).encode()}
     from bench.figures import reconstruction_figure, renders_figure, uncertainty_figure
 
     extra = ""
@@ -654,11 +654,11 @@ def write_table_outputs(report: TableReport, out_dir: str | Path, figures: bool 
         png = make(report, out) if figures else None
         if png is not None:
             paths[f"{kind}_png"] = out / f"{name}_{kind}.png"
-            atomic_write_bytes(paths[f"{kind}_png"], png)
+            files[paths[f"{kind}_png"]] = png
             extra += f"\n![{kind}]({paths[f'{kind}_png'].name})\n\n{caption}\n"
-    atomic_write_text(paths["md"], to_markdown(report, heading_level=1)
-                      + f"\n![accuracy vs time]({paths['png'].name})\n" + extra)
-    atomic_write_bytes(paths["png"], plot_accuracy_vs_time(report, curves))
+    files[paths["md"]] = (to_markdown(report, heading_level=1) + f"\n![accuracy vs time]({paths['png'].name})\n" + extra).encode()
+    files[paths["png"]] = plot_accuracy_vs_time(report, curves)
+    atomic_write_many(files)  # all of a table's outputs or none (a full disk leaves the previous set)
     return paths
 
 

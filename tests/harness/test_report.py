@@ -264,3 +264,30 @@ def test_paper_unit_is_shown_and_kept_in_csv(tmp_path: Path) -> None:
     paper = rep.tidy[rep.tidy["source"] == "paper"]
     assert set(paper["unit"]) == {"mm"}
     assert set(rep.tidy[rep.tidy["source"] == "ours"]["unit"]) == {"m"}
+
+
+def test_table_outputs_are_all_or_nothing_on_a_full_disk(tmp_path, monkeypatch):
+    """The disk fills while a table's files are written: no target file is touched, no temporary stays."""
+    import os
+
+    import bench.atomic as atomic
+
+    real_fdopen, calls = os.fdopen, []
+
+    def full_after_two(fd, mode="r", *a, **k):
+        fh = real_fdopen(fd, mode, *a, **k)
+        calls.append(1)
+        if len(calls) > 2:
+            fh.close()
+            raise OSError(28, "No space left on device")
+        return fh
+
+    monkeypatch.setattr(atomic.os, "fdopen", full_after_two)
+    files = {tmp_path / f"t{i}.csv": b"x" * 10 for i in range(5)}
+    (tmp_path / "t0.csv").write_bytes(b"old")
+    with pytest.raises(OSError, match="No space"):
+        atomic.atomic_write_many(files)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t0.csv"] and (tmp_path / "t0.csv").read_bytes() == b"old"
+    monkeypatch.setattr(atomic.os, "fdopen", real_fdopen)
+    atomic.atomic_write_many(files)
+    assert all(p.read_bytes() == b"x" * 10 for p in files)
