@@ -52,10 +52,39 @@ def recipe_hash(path: Path, effects: Mapping[str, Mapping[str, Any]] | None = No
     return hashlib.sha256(data).hexdigest()[:10]
 
 
+def is_folder_scene(scene: str) -> bool:
+    """True when a table / study names an existing dataset folder instead of a recipe (a user's own data)."""
+    return ("/" in scene or scene.startswith(".")) and Path(scene).expanduser().is_dir()
+
+
+def folder_hash(folder: Path) -> str:
+    """Short hash of a dataset folder's files (names and bytes) and the code version: a job on a folder
+    reruns when the data changes."""
+    h = hashlib.sha256(__version__.encode())
+    for p in sorted(Path(folder).rglob("*")):
+        if p.is_file() and not p.name.startswith("."):
+            h.update(str(p.relative_to(folder)).encode())
+            h.update(p.read_bytes())
+    return h.hexdigest()[:12]
+
+
+def scene_hash(scene: str, effects: Mapping[str, Mapping[str, Any]] | None = None) -> str:
+    """What a job id covers of its data: the recipe (and variant) hash, or the folder's content hash."""
+    if is_folder_scene(scene):
+        return folder_hash(Path(scene).expanduser())
+    return recipe_hash(recipe_path(scene), effects)
+
+
 def ensure_dataset(scene_name: str, scale: str, cache_dir: Path = DEFAULT_CACHE, scenes_dir: Path = SCENES_DIR,
                    effects: Mapping[str, Mapping[str, Any]] | None = None) -> Path:
-    """Return the dataset folder of ``scene_name`` (variant ``effects``) at ``scale``, synthesising it if not cached."""
+    """Return the dataset folder of ``scene_name`` (variant ``effects``) at ``scale``, synthesising it if not
+    cached; a dataset folder named as the scene is returned as it is (no variant possible)."""
     from bench.synth.make import make_dataset
+
+    if is_folder_scene(scene_name):
+        if effects:
+            raise BenchInputError(scene_name, "a dataset folder has no recipe: scene variants (effects) need a recipe scene")
+        return Path(scene_name).expanduser()
 
     path = recipe_path(scene_name, scenes_dir)
     out = Path(cache_dir) / f"{scene_name}-{scale}-{recipe_hash(path, effects)}"
@@ -71,6 +100,8 @@ def load_dataset(scene_name: str, scale: str, cache_dir: Path = DEFAULT_CACHE,
 
     from bench.synth.recipe import load_recipe
 
+    if is_folder_scene(scene_name):  # a user's own folder: loaded as it is (LLFF at its full resolution)
+        return load_scene(ensure_dataset(scene_name, scale, cache_dir, effects=effects))
     recipe = load_recipe(recipe_path(scene_name))
     options = {"factor": int(recipe.get("llff", "factors", scale=scale, default=[2])[0])} if recipe.format == "llff" else {}
     # (the LLFF protocol trains and evaluates on images_N, FSGS: images_8)

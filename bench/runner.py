@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Any, Callable
 
 from bench import __version__
 from bench.atomic import atomic_write_json
-from bench.datasets import DEFAULT_CACHE, load_dataset, recipe_hash, recipe_path
+from bench.datasets import DEFAULT_CACHE, load_dataset, scene_hash
 from bench.evaluate import evaluate_snapshot
 from bench.tables import JobPlan
 from methods.registry import available_methods, get_method, method_config
@@ -69,7 +69,7 @@ def job_id_for(plan: JobPlan, config: dict[str, Any]) -> str:
         "method": plan.method,
         "config": config,
         "scene": plan.scene,
-        "recipe": recipe_hash(recipe_path(plan.scene), plan.effects),
+        "recipe": scene_hash(plan.scene, plan.effects),
         "seed": plan.seed,
         "scale": plan.scale,
         "protocol": plan.protocol,

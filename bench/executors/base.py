@@ -156,8 +156,10 @@ def prepare_dataset(scene: str, scale: str, cache_dir: Path, effects: Any = None
     waits and then finds the first one's folder. Without a working lock, the loser of the race gets
     ``FileExistsError`` from ``atomic_directory``; it then uses the winner's folder.
     """
-    from bench.datasets import ensure_dataset
+    from bench.datasets import ensure_dataset, is_folder_scene
 
+    if is_folder_scene(scene):  # a user's dataset folder: nothing to synthesise
+        return
     cache_dir = Path(cache_dir)
     with _file_lock(cache_dir / ".locks" / f"{scene}-{scale}.lock"):
         try:

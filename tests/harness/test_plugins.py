@@ -70,3 +70,32 @@ def test_a_broken_plugin_is_one_clear_error(installed_plugin, capsys):
     assert main(["list"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "plugin 'broken'" in err[0] and "NoSuchClass" in err[0]
+
+
+def test_a_table_may_name_a_dataset_folder_as_a_scene(tmp_path):
+    """A user's own folder (here: a synthesised scene copied out of the cache, loaded as real data) as a
+    table's scene; the job id follows the folder's bytes."""
+    import shutil as sh
+
+    from bench.datasets import ensure_dataset, scene_hash
+
+    mine = tmp_path / "my_scan"
+    sh.copytree(ensure_dataset("scannet_like_tiny", "tiny"), mine)
+    table = tmp_path / "own.yaml"
+    table.write_text(f"""
+name: own
+title: "Oracle on my own folder"
+datasets:
+  - {{id: scannet, label: Mine, dataset: scannet, protocol: scannet, scenes: {{tiny: ["{mine}"]}},
+     columns: [{{key: fscore, label: F-score, direction: higher, unit: "", fmt: ".3f"}}]}}
+seeds: {{tiny: [0]}}
+rows:
+  - {{label: "Oracle", method: oracle_tsdf, paper: null}}
+""")
+    out = tmp_path / "runs"
+    assert main(["run", "--table", str(table), "--scale", "tiny", "--out", str(out), "--quiet", "--no-artifacts"]) == 0
+    rows = [json.loads(p.read_text()) for p in (out / "tiny" / "jobs").glob("*.json")]
+    assert len(rows) == 1 and rows[0]["status"] == "ok" and rows[0]["metrics"]["fscore"] > 0.9
+    before = scene_hash(str(mine))
+    (mine / "000000_rgb.png").write_bytes((mine / "000001_rgb.png").read_bytes())
+    assert scene_hash(str(mine)) != before
