@@ -132,6 +132,15 @@ class MonoSDFTrainer:
         frac = self.step_count / max(int(self.cfg["iterations"]), 1)
         self.sdf.set_active_levels(n0 + (int(frac / every) if every > 0 else self.cfg["grid_levels"]))
 
+    def _set_beta_floor(self) -> None:
+        """``beta_floor``: beta >= beta_floor * (1 - t / beta_floor_until) + beta_min for the first
+        ``beta_floor_until`` of the schedule (t = fraction done), then MonoSDF's beta_min: the surface
+        stays soft while the objects are still to be carved out of free space (docs/monosdf.md, session 6)."""
+        floor, until = float(self.cfg.get("beta_floor", 0.0) or 0.0), float(self.cfg.get("beta_floor_until", 0.0) or 0.0)
+        frac = self.step_count / max(int(self.cfg["iterations"]), 1)
+        extra = floor * max(0.0, 1.0 - frac / until) if floor > 0 and until > 0 else 0.0
+        self.density.beta_min = float(self.cfg["beta_min"]) + extra
+
     def _set_lr(self) -> None:
         frac = min(self.step_count / max(int(self.cfg["iterations"]), 1), 1.0)
         decay = float(self.cfg["lr_decay"]) ** frac * max(self._warmup("lr_warmup"), 1e-2)
@@ -174,6 +183,7 @@ class MonoSDFTrainer:
         image and averaged over the images."""
         cfg = self.cfg
         self._set_levels()
+        self._set_beta_floor()
         k = max(1, int(cfg.get("images_per_batch", 1)))
         if view is not None:
             views = [int(view)]

@@ -387,3 +387,14 @@ def test_depth_edges_mark_both_sides_of_a_jump_only():
     z = np.full((5, 5), 2.0)
     z[2, 2] = 0.0  # an invalid pixel: its neighbours are a border
     assert depth_edges(z)[1:4, 1:4].all() and not depth_edges(z)[0, 0]
+
+
+def test_beta_floor_decays_linearly_to_beta_min(tiny_scene):
+    tr = _trainer(tiny_scene, beta_floor=0.08, beta_floor_until=0.5, iterations=8)
+    mins = []
+    for _ in range(6):
+        tr.step()
+        mins.append(tr.density.beta_min)
+        assert float(tr.density.beta()) >= tr.density.beta_min
+    np.testing.assert_allclose(mins, [1e-4 + 0.08 * max(0.0, 1 - k / 4) for k in range(6)], atol=1e-9)
+    assert _trainer(tiny_scene).density.beta_min == pytest.approx(1e-4)
