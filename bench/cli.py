@@ -139,10 +139,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     names = list_tables(TABLES_DIR) if args.table == ["all"] else args.table
     out = Path(args.out) / args.scale
     specs, jobs_by_table = [], {}
+    threads = _planned_threads(args)
     for name in names:
         spec = load_table_spec(_table_path(name))
         plans = select_plans(spec, plan_jobs(spec, args.scale), args.rows, args.scenes, args.seeds)
-        jobs, pending = resolve_jobs(plans)
+        jobs, pending = resolve_jobs(plans, threads)
         pending_methods = sorted({p.method for p in pending})
         print(f"table {spec.name}: {len(jobs)} jobs at scale {args.scale!r}"
               + (f"; pending (not implemented yet): {', '.join(pending_methods)}" if pending_methods else ""))
@@ -191,6 +192,26 @@ def check_writable(out: Path) -> None:
         raise BenchInputError(str(out), f"output folder is not writable: {exc.strerror or exc}") from None
 
 
+def _workers(args: argparse.Namespace) -> int | None:
+    """``--workers``, or for the local executor one single-threaded job per core: 2 x 1-thread MonoSDF
+    jobs do 0.67 M samples/s in total, one 2-thread job 0.53 M (benchmarks/bench_monosdf_step.py,
+    README "Measured speed")."""
+    if args.workers is None and args.executor == "local":
+        from bench.executors.base import available_cores
+
+        return available_cores()
+    return args.workers
+
+
+def _planned_threads(args: argparse.Namespace) -> int | None:
+    """The torch threads per job the ``--executor / --workers`` flags will give (None: decided per worker)."""
+    from bench.executors.base import threads_per_job
+
+    if args.executor != "local":
+        return None
+    return threads_per_job(max(1, _workers(args) or 1))
+
+
 def _executor(args: argparse.Namespace):
     """The executor the ``--executor / --workers / --scheduler / --retries`` flags ask for."""
     from bench.executors import make_executor
@@ -201,14 +222,7 @@ def _executor(args: argparse.Namespace):
         raise BenchInputError("--retries", f"must be >= 0, got {args.retries}")
     if args.scheduler is not None and args.executor != "dask":
         raise BenchInputError("--scheduler", "only with --executor dask")
-    workers = args.workers
-    if workers is None and args.executor == "local":
-        from bench.executors.base import available_cores
-
-        # one single-threaded job per core: 2 x 1-thread MonoSDF jobs do 0.67 M samples/s in total,
-        # one 2-thread job 0.53 M (benchmarks/bench_monosdf_step.py, README "Measured speed")
-        workers = available_cores()
-    return make_executor(args.executor, workers=workers, scheduler=args.scheduler, retries=args.retries)
+    return make_executor(args.executor, workers=_workers(args), scheduler=args.scheduler, retries=args.retries)
 
 
 def _add_executor_flags(p: argparse.ArgumentParser) -> None:

@@ -264,8 +264,9 @@ def run_regress(args: argparse.Namespace) -> int:
                 print(f"table {spec.name}: no reference yet at {ref_path} (create it with --update-reference); skipped")
                 continue
             rows = getattr(args, "rows", None)
-            jobs, pending = resolve_jobs(select_plans(spec, plan_jobs(spec, args.scale), rows, None, None))
             source = getattr(args, "from_results", None)
+            jobs, pending = resolve_jobs(select_plans(spec, plan_jobs(spec, args.scale), rows, None, None),
+                                         None if source is not None else executor.planned_threads)
             if source is not None:  # no fresh run: the stored results of an earlier `bench run` (same ids)
                 df = collect_results(Path(source) / args.scale)
                 print(f"table {spec.name}: {len(jobs)} jobs read from {Path(source) / args.scale} (no fresh run)")
@@ -273,7 +274,7 @@ def run_regress(args: argparse.Namespace) -> int:
                 print(f"table {spec.name}: fresh run of {len(jobs)} jobs at scale {args.scale!r} on {executor.describe()}")
                 run_jobs(jobs, out, force=True, show_progress=not args.quiet, executor=executor)
                 df = collect_results(out)
-            df = df[df["job_id"].isin({j.job_id for j in jobs})]
+            df = df[df["base_id"].isin({j.base_id for j in jobs})]
             report = build_table(spec, df, args.scale, available_methods(), plans=plan_index(jobs))
             write_table_outputs(report, out)
             if args.update_reference:

@@ -40,7 +40,7 @@ from bench.tables import ClaimSpec, DatasetGroup, TableSpec, resolve
 RESULT_SCHEMA = 1
 _REQUIRED = ("job_id", "table", "row", "method", "scene", "dataset", "seed", "scale", "status")
 RESULT_COLUMNS = [
-    "job_id", "table", "row", "method", "group", "dataset", "scene", "seed", "scale", "status",
+    "job_id", "base_id", "table", "row", "method", "group", "dataset", "scene", "seed", "scale", "status",
     "error_type", "error_message", "metrics", "timings", "iterations", "curve", "config", "created",
     "worker", "versions", "path",
 ]
@@ -81,7 +81,7 @@ def _read_job(path: Path) -> dict[str, Any]:
     except (TypeError, ValueError):
         raise BenchInputError(path, f"seed: expected an integer, got {d['seed']!r}") from None
     return {
-        "job_id": str(d["job_id"]), "table": str(d["table"]), "row": str(d["row"]),
+        "job_id": str(d["job_id"]), "base_id": str(d.get("base_id") or d["job_id"]), "table": str(d["table"]), "row": str(d["row"]),
         "method": str(d["method"]), "group": d.get("group"), "dataset": str(d["dataset"]),
         "scene": str(d["scene"]), "seed": seed, "scale": str(d["scale"]),
         "status": d["status"],
@@ -179,14 +179,19 @@ def _select_by_id(spec: TableSpec, df: pd.DataFrame, scale: str, plans: PlanInde
     group: a job another table ran (same method, config, scene, variant, seed, scale, protocol) counts
     here too. Results of this table with other ids (older configs or code versions) are unmatched."""
     records = []
+    n_superseded = 0
     if len(df):
-        for rec in df[df["job_id"].isin(list(plans))].to_dict("records"):
-            for plan in plans[rec["job_id"]]:
+        matched = df[df["base_id"].isin(list(plans))]
+        # the same job run with another torch thread count (another job id, same base id): the newest counts
+        newest = matched.sort_values("created").drop_duplicates("base_id", keep="last")
+        n_superseded = len(matched) - len(newest)
+        for rec in newest.to_dict("records"):
+            for plan in plans[rec["base_id"]]:
                 records.append({**rec, "table": spec.name, "row": plan.row, "group": plan.group, "gid": plan.group})
     both = pd.DataFrame.from_records(records, columns=list(df.columns) + ["gid"]) if records else df.iloc[:0].assign(gid="")
     mine = df[(df["table"] == spec.name) & (df["scale"] == scale)] if len(df) else df
-    n_unmatched = int((~mine["job_id"].isin(list(plans))).sum()) if len(mine) else 0
-    return both.reset_index(drop=True), n_unmatched, 0
+    n_unmatched = int((~mine["base_id"].isin(list(plans))).sum()) if len(mine) else 0
+    return both.reset_index(drop=True), n_unmatched, n_superseded
 
 
 def _select(spec: TableSpec, df: pd.DataFrame, scale: str, plans: PlanIndex | None = None) -> tuple[pd.DataFrame, int, int]:

@@ -50,6 +50,11 @@ class Job:
     config: dict[str, Any]
     job_id: str
     artifact_root: str | None = None  # write the job's mesh / maps under <root>/<job_id>/ (not part of the id)
+    base_id: str = ""  # the id without the thread count: what tables match results by ("" = job_id)
+
+    def __post_init__(self) -> None:
+        if not self.base_id:
+            object.__setattr__(self, "base_id", self.job_id)  # frozen dataclass
 
 
 def method_metrics(extra: dict[str, Any]) -> dict[str, float]:
@@ -63,8 +68,11 @@ def method_metrics(extra: dict[str, Any]) -> dict[str, float]:
     return out
 
 
-def job_id_for(plan: JobPlan, config: dict[str, Any]) -> str:
-    """Stable 16-hex id of a job (see module docstring for what it covers)."""
+def job_id_for(plan: JobPlan, config: dict[str, Any], threads: int | None = None) -> str:
+    """Stable 16-hex id of a job (see module docstring for what it covers). ``threads``: the torch threads
+    the job will run with, when the executor knows it (results differ by up to ~0.003 F between thread
+    counts: float sums in another order), so a row computed with another count is not silently reused;
+    without it, the *base id* that tables and reports match results by."""
     key = {
         "method": plan.method,
         "config": config,
@@ -75,11 +83,14 @@ def job_id_for(plan: JobPlan, config: dict[str, Any]) -> str:
         "protocol": plan.protocol,
         "version": __version__,
     }
+    if threads is not None:
+        key["torch_threads"] = int(threads)
     return hashlib.sha256(json.dumps(key, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
-def resolve_jobs(plans: list[JobPlan]) -> tuple[list[Job], list[JobPlan]]:
-    """Resolve configs and ids; returns (runnable jobs, plans whose method is not implemented yet)."""
+def resolve_jobs(plans: list[JobPlan], threads: int | None = None) -> tuple[list[Job], list[JobPlan]]:
+    """Resolve configs and ids (``threads``: see :func:`job_id_for`); returns (runnable jobs, plans whose
+    method is not implemented yet)."""
     known = set(available_methods())
     jobs, pending = [], []
     for plan in plans:
@@ -87,16 +98,17 @@ def resolve_jobs(plans: list[JobPlan]) -> tuple[list[Job], list[JobPlan]]:
             pending.append(plan)
             continue
         config = method_config(plan.method, plan.scale, dict(plan.overrides))
-        jobs.append(Job(plan, config, job_id_for(plan, config)))
+        base = job_id_for(plan, config)
+        jobs.append(Job(plan, config, job_id_for(plan, config, threads) if threads is not None else base, base_id=base))
     return jobs, pending
 
 
 def plan_index(jobs: list[Job]) -> dict[str, list[JobPlan]]:
-    """Job id -> the plans (table rows x group x scene x seed) it stands for; what
+    """Base job id -> the plans (table rows x group x scene x seed) it stands for; what
     :func:`bench.report.build_table` matches results by, so a job shared by tables counts in each."""
     index: dict[str, list[JobPlan]] = {}
     for job in jobs:
-        index.setdefault(job.job_id, []).append(job.plan)
+        index.setdefault(job.base_id, []).append(job.plan)
     return index
 
 
@@ -133,6 +145,7 @@ def row_head(job: Job) -> dict[str, Any]:
     plan = job.plan
     return {
         "job_id": job.job_id,
+        "base_id": job.base_id,
         "schema": RESULT_SCHEMA,
         "table": plan.table,
         "row": plan.row,

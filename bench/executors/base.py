@@ -80,6 +80,12 @@ class Executor(ABC):
         """Run ``jobs``; yield events, exactly one ``done`` per job. ``progress_for(job)`` may give a
         per-job progress callback (used only where the job runs in this process)."""
 
+    @property
+    def planned_threads(self) -> int | None:
+        """Torch threads every job will get, when known before the jobs run (it enters the job id,
+        :func:`bench.runner.job_id_for`); None when it depends on the worker a job lands on (Dask)."""
+        return None
+
     def close(self) -> None:
         """Release workers / connections (idempotent)."""
 

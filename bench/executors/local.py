@@ -65,6 +65,10 @@ class LocalExecutor(Executor):
         """Torch threads per job: this machine's cores divided by the workers."""
         return threads_per_job(self.workers)
 
+    @property
+    def planned_threads(self) -> int | None:
+        return self.threads
+
     def run(self, jobs: Sequence["Job"], cache_dir: Path, progress_for: ProgressFactory | None = None) -> Iterator[Event]:
         if self.workers == 1:
             yield from self._run_here(jobs, cache_dir, progress_for)

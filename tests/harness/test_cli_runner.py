@@ -10,7 +10,7 @@ import pytest
 from bench.executors.local import LocalExecutor
 
 from bench.cli import main
-from bench.runner import Job, job_id_for, resolve_jobs, run_jobs
+from bench.runner import Job, job_id_for, plan_index, resolve_jobs, run_jobs
 from bench.tables import JobPlan, load_table_spec, plan_jobs
 from methods.registry import available_methods, method_config
 
@@ -190,3 +190,24 @@ def test_failed_job_makes_run_exit_1_and_plain_log_has_a_line_per_job(tmp_path, 
     assert "started Oracle" in captured.out and "failed Oracle" in captured.out
     assert "jobs failed" in captured.err
     assert (tmp_path / "tiny" / "ablation.md").exists()
+
+
+def test_thread_count_is_in_the_job_id_and_the_newest_result_counts(tmp_path):
+    """Results depend on the torch thread count (float sums in another order), so a row computed with
+    1 thread is not reused by a run planning 2 (issue 'Hard to break', item 6); the table matches both by
+    the base id and shows the newest, counting the other as superseded."""
+    import time
+
+    spec = load_table_spec(REPO / "configs" / "tables" / "ablation.yaml")
+    plans = [p for p in plan_jobs(spec, "tiny") if p.row == ORACLE]
+    one, _ = resolve_jobs(plans, threads=1)
+    two, _ = resolve_jobs(plans, threads=2)
+    assert one[0].job_id != two[0].job_id and one[0].base_id == two[0].base_id == resolve_jobs(plans)[0][0].job_id
+    for jobs in (one, two):
+        run_jobs(jobs, tmp_path, show_progress=False)
+        time.sleep(1.1)  # "created" has 1 s resolution
+    assert len(list((tmp_path / "jobs").glob("*.json"))) == 2  # the 2-thread plan did not reuse the 1-thread row
+    from bench.report import build_table, collect_results
+
+    rep = build_table(spec, collect_results(tmp_path), "tiny", available_methods(), plans=plan_index(two))
+    assert rep.n_superseded == 1 and len(rep.jobs) == 1 and rep.jobs.iloc[0]["job_id"] == two[0].job_id
