@@ -1,7 +1,6 @@
 """A method from an installed package (entry point group ``monoinstance_bench.methods``): the example
-plugin in ``examples/plugin_method`` is installed into a temporary site folder (the layout pip writes: the
-package plus a ``.dist-info`` with ``entry_points.txt``), appears in ``bench list`` and runs in a tiny
-table given by path."""
+plugin in ``examples/plugin_method`` is pip-installed into a temporary site folder, appears in ``bench
+list`` and runs in a tiny table given by path."""
 
 from __future__ import annotations
 
@@ -20,12 +19,15 @@ REPO = Path(__file__).resolve().parents[2]
 
 @pytest.fixture()
 def installed_plugin(tmp_path, monkeypatch):
+    """``pip install`` of the example package (a copy of it, offline, no build isolation) into a temporary
+    site folder put on sys.path: what a user's ``pip install my-method`` does, without touching the venv."""
+    import subprocess
+
+    src = tmp_path / "plugin_src"
+    shutil.copytree(REPO / "examples" / "plugin_method", src)
     site = tmp_path / "site"
-    shutil.copytree(REPO / "examples" / "plugin_method" / "bench_example_method", site / "bench_example_method")
-    info = site / "bench_example_method-0.1.0.dist-info"
-    info.mkdir()
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: bench-example-method\nVersion: 0.1.0\n")
-    (info / "entry_points.txt").write_text("[monoinstance_bench.methods]\nmetric_prior_tsdf = bench_example_method:MetricPriorTSDF\n")
+    subprocess.run([sys.executable, "-m", "pip", "install", "--no-build-isolation", "--no-deps", "--no-index", "-q",
+                    "--target", str(site), str(src)], check=True, timeout=300)
     monkeypatch.syspath_prepend(str(site))
     monkeypatch.setattr(registry, "_plugins_loaded", False)
     yield site
@@ -65,7 +67,7 @@ rows:
 
 
 def test_a_broken_plugin_is_one_clear_error(installed_plugin, capsys):
-    (installed_plugin / "bench_example_method-0.1.0.dist-info" / "entry_points.txt").write_text(
+    (next(installed_plugin.glob("bench_example_method-*.dist-info")) / "entry_points.txt").write_text(
         "[monoinstance_bench.methods]\nbroken = bench_example_method:NoSuchClass\n")
     assert main(["list"]) == 2
     err = capsys.readouterr().err.strip().splitlines()

@@ -39,7 +39,8 @@ def test_all_tables_tiny(tmp_path):
         assert (out / f"{t}_accuracy_vs_time.png").stat().st_size > 0
         assert f"({t}.md)" in report
     # figures drawn from the per-job artifacts, embedded in each table and in report.md
-    for fig in ("ablation_reconstructions", "ablation_uncertainty", "dense_reconstructions", "dtu_reconstructions", "llff_renders"):
+    for fig in ("ablation_reconstructions", "ablation_uncertainty", "dense_reconstructions", "dtu_reconstructions",
+                "priors_reconstructions", "priors_uncertainty", "llff_renders"):
         assert (out / f"{fig}.png").stat().st_size > 5000, fig
         assert f"({fig}.png)" in report and f"({fig}.png)" in (out / f"{fig.split('_')[0]}.md").read_text(), fig
     # the MonoInstance (Full) job of scannet_like_tiny is shared by the ablation, dense and priors tables
