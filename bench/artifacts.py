@@ -6,7 +6,8 @@
 * ``uncertainty.npy`` (float16, (N, H, W), 0 = certain .. 1 = most uncertain) and ``uncertainty.png``
   (the first views' maps beside their images): MonoInstance's per-view density uncertainty;
 * ``renders.npy`` (float16, (M, H, W, 3) in [0, 1]) and ``renders.png``: the final snapshot's test-view
-  renders (view-synthesis methods, e.g. LLFF).
+  renders (view-synthesis methods, e.g. LLFF); ``depths.npy`` (float16, (M, H, W) z-depth in metres, 0 =
+  not covered) when the method renders depth.
 
 The folder is written to a hidden temporary beside it and renamed into place, so it is complete or
 absent (a killed job leaves no half-written artifacts). Size at the small scale: a room mesh at
@@ -97,6 +98,10 @@ def write_job_artifacts(artifacts: Any, scene: Any, folder: Path, budget_mb: flo
         buf = io.BytesIO()
         np.save(buf, r.astype(np.float16), allow_pickle=False)
         files["renders.npy"] = buf.getvalue()
+        if final.depths is not None:
+            buf = io.BytesIO()
+            np.save(buf, np.asarray(final.depths, dtype=np.float16), allow_pickle=False)
+            files["depths.npy"] = buf.getvalue()
     if final is not None and final.mesh is not None and len(getattr(final.mesh, "faces", [])):
         left = budget - sum(len(b) for b in files.values())
         files["mesh.ply"], notes = _mesh_bytes(final.mesh, max(left, 0.25 * budget))

@@ -11,7 +11,8 @@ scene / seed: the image, the estimated uncertainty and the true error of the dep
 (|prior aligned to GT by per-view scale + shift - GT depth|, the paper's Figs. 2 / 3 / 6 argument: the
 uncertainty should be high where the prior is wrong).
 
-:func:`renders_figure`: for every view-synthesis row (LLFF), its renders of 3 test views beside the GT.
+:func:`renders_figure`: for every view-synthesis row (LLFF), its renders of 2 test views beside the GT
+images, and its rendered depth beside the GT depth (same colour scale, metres).
 """
 
 from __future__ import annotations
@@ -209,7 +210,7 @@ def uncertainty_figure(report: Any, out_dir: Path, cache_dir: Path | None = None
 
 
 def renders_figure(report: Any, out_dir: Path, cache_dir: Path | None = None) -> bytes | None:
-    """PNG: 3 test views of every view-synthesis row, its render beside the GT image."""
+    """PNG: 2 test views of every view-synthesis row: render, GT image, rendered depth, GT depth."""
     from bench.datasets import DEFAULT_CACHE, load_dataset
 
     cells, labels = [], []
@@ -218,10 +219,19 @@ def renders_figure(report: Any, out_dir: Path, cache_dir: Path | None = None) ->
         test = scene.view_indices("test")
         for label, path in rows:
             renders = np.load(path).astype(np.float32)
-            pick = np.linspace(0, len(renders) - 1, min(3, len(renders))).round().astype(int)
+            depths = np.load(path.with_name("depths.npy")).astype(np.float32) if path.with_name("depths.npy").is_file() else None
+            pick = np.linspace(0, len(renders) - 1, min(2, len(renders))).round().astype(int)
             row = []
             for i in pick:
-                row += [(np.clip(renders[i], 0, 1), f"render, test view {int(test[i])}", {}), (scene.images[int(test[i])], "GT", {})]
+                v = int(test[i])
+                row += [(np.clip(renders[i], 0, 1), f"render, test view {v}", {}), (scene.images[v], "GT", {})]
+                if depths is not None:
+                    gt_d = scene.gt_depth[v] if scene.gt_depth is not None else None
+                    hi = float(np.percentile(gt_d[gt_d > 0], 99)) if gt_d is not None and (gt_d > 0).any() else float(depths[i].max() or 1.0)
+                    kw = {"cmap": "viridis", "vmin": 0.0, "vmax": hi}
+                    row.append((np.where(depths[i] > 0, depths[i], np.nan), "rendered depth", kw))
+                    if gt_d is not None:
+                        row.append((np.where(gt_d > 0, gt_d, np.nan), "GT depth", kw))
             cells.append(row)
             labels.append(f"{g.label}: {label}")
     return _grid_png(cells, labels) if cells else None

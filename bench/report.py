@@ -654,7 +654,8 @@ def write_table_outputs(report: TableReport, out_dir: str | Path, figures: bool 
          "each pixel coloured by the distance of the surface it sees to the GT mesh (0-10 cm; grey: no surface)."),
         ("uncertainty", uncertainty_figure, "Estimated uncertainty beside the true error of the depth prior (|prior aligned "
          "to GT by per-view scale + shift - GT|), 3 views of the first scene and seed."),
-        ("renders", renders_figure, "Test-view renders beside the GT images (first scene and seed)."),
+        ("renders", renders_figure, "Test-view renders beside the GT images, rendered depth beside the GT depth "
+         "(first scene and seed)."),
     ):
         png = make(report, out) if figures else None
         if png is not None:

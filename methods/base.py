@@ -26,6 +26,7 @@ class Snapshot:
         seconds: wall seconds spent in the method up to this snapshot (excluding evaluation).
         mesh: reconstructed surface (trimesh.Trimesh, world metres) for geometry methods, else None.
         renders: (M, H, W, 3) float32 renders of the scene's test views for view-synthesis methods, else None.
+        depths: (M, H, W) float32 rendered z-depth (m, 0 = not covered) of the same test views, if the method has it.
         diagnostics: the method's own numbers at this point (JSON scalars), e.g. MonoSDF's beta, its
             loss terms averaged since the previous snapshot and the median rendered-depth error (m)
             against GT on training views; recorded in the result row's curve.
@@ -36,6 +37,7 @@ class Snapshot:
     seconds: float
     mesh: Any = None
     renders: np.ndarray | None = None
+    depths: np.ndarray | None = None
     diagnostics: dict[str, float] = field(default_factory=dict)
 
 

@@ -159,10 +159,13 @@ def train_gaussians(scene: Scene, cfg: dict[str, Any], seed: int, progress: Call
         if step + 1 in snap_steps:
             t = time.perf_counter()
             with torch.no_grad():
-                renders = np.stack([render(params, viewmats[v], Ks[v], W, H, deg, bg, **rkw)["color"].clamp(0, 1).numpy() for v in test])
+                outs = [render(params, viewmats[v], Ks[v], W, H, deg, bg, **rkw) for v in test]
+                renders = np.stack([o["color"].clamp(0, 1).numpy() for o in outs])
+                depths = np.stack([torch.where(o["alpha"] >= 0.5, o["depth"] / o["alpha"].clamp_min(1e-6), torch.zeros_like(o["alpha"])).numpy()
+                                   for o in outs])  # expected z-depth where the view is covered (as _render_depths)
             timings["render"] += time.perf_counter() - t
             snapshots.append(Snapshot(fraction=snap_steps[step + 1], iterations=step + 1, seconds=train_seconds + timings["init"] + timings["uncertainty"],
-                                      renders=renders.astype(np.float32)))
+                                      renders=renders.astype(np.float32), depths=depths.astype(np.float32)))
     timings["train"] = train_seconds
     extra.update(n_gaussians=int(params["means"].shape[0]), n_clone=strategy.n_clone, n_split=strategy.n_split, n_prune=strategy.n_prune,
                  final_loss=float(np.mean(loss_hist[-20:])) if loss_hist else None)

@@ -17,9 +17,9 @@ class _Scene:
 def test_mesh_uncertainty_and_renders_are_written_and_readable(tmp_path):
     mesh = trimesh.creation.icosphere(2)
     unc = np.random.default_rng(1).random((3, 12, 16)).astype(np.float32)
-    snap = Snapshot(1.0, 10, 1.0, mesh=mesh, renders=np.zeros((2, 12, 16, 3), np.float32))
+    snap = Snapshot(1.0, 10, 1.0, mesh=mesh, renders=np.zeros((2, 12, 16, 3), np.float32), depths=np.ones((2, 12, 16), np.float32))
     files = write_job_artifacts(Artifacts([snap], uncertainty=unc), _Scene(), tmp_path / "job")
-    assert files == ["mesh.ply", "renders.npy", "renders.png", "uncertainty.npy", "uncertainty.png"]
+    assert files == ["depths.npy", "mesh.ply", "renders.npy", "renders.png", "uncertainty.npy", "uncertainty.png"]
     back = trimesh.load(tmp_path / "job" / "mesh.ply", process=False)
     assert len(back.faces) == len(mesh.faces)
     np.testing.assert_allclose(np.load(tmp_path / "job" / "uncertainty.npy"), unc, atol=1e-3)
