@@ -26,34 +26,14 @@ from typing import Any
 
 import numpy as np
 
+from bench.figures import grid_png
+
 BUDGET_MB = 8.0
 PREVIEW_VIEWS = 4
 
 
 def artifact_dir(root: Path, job_id: str) -> Path:
     return Path(root) / job_id
-
-
-def _png_grid(rows: list[list[np.ndarray]], titles: list[list[str]], cmap: str | None = None) -> bytes:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    n_r, n_c = len(rows), max(len(r) for r in rows)
-    fig, ax = plt.subplots(n_r, n_c, figsize=(2.6 * n_c, 2.1 * n_r), squeeze=False)
-    for i, row in enumerate(rows):
-        for j in range(n_c):
-            ax[i, j].axis("off")
-            if j < len(row):
-                img = row[j]
-                ax[i, j].imshow(img, cmap=None if img.ndim == 3 else cmap, vmin=0, vmax=1)
-                ax[i, j].set_title(titles[i][j], fontsize=8)
-    fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=80)
-    plt.close(fig)
-    return buf.getvalue()
 
 
 def _mesh_bytes(mesh: Any, budget_bytes: float) -> tuple[bytes, str]:
@@ -88,13 +68,13 @@ def write_job_artifacts(artifacts: Any, scene: Any, folder: Path, budget_mb: flo
         k = min(PREVIEW_VIEWS, len(unc))
         views = np.linspace(0, len(unc) - 1, k).round().astype(int)
         img_views = views if len(unc) == scene.num_views else np.arange(k)
-        files["uncertainty.png"] = _png_grid(
-            [[scene.images[i] for i in img_views], [unc[i].astype(np.float32) for i in views]],
-            [[f"image {i}" for i in img_views], [f"uncertainty {i}" for i in views]], cmap="inferno")
+        files["uncertainty.png"] = grid_png(
+            [[(scene.images[i], f"image {i}", {}) for i in img_views],
+             [(unc[i].astype(np.float32), f"uncertainty {i}", {"cmap": "inferno", "vmin": 0, "vmax": 1}) for i in views]])
     if final is not None and final.renders is not None and len(final.renders):
         r = np.clip(np.asarray(final.renders, dtype=np.float32), 0, 1)
         k = min(PREVIEW_VIEWS, len(r))
-        files["renders.png"] = _png_grid([[r[i] for i in range(k)]], [[f"test render {i}" for i in range(k)]])
+        files["renders.png"] = grid_png([[(r[i], f"test render {i}", {}) for i in range(k)]])
         buf = io.BytesIO()
         np.save(buf, r.astype(np.float16), allow_pickle=False)
         files["renders.npy"] = buf.getvalue()

@@ -37,18 +37,24 @@ def _backproject(depth: np.ndarray, K: np.ndarray, c2w: np.ndarray) -> np.ndarra
     return cam @ c2w[:3, :3].T + c2w[:3, 3]
 
 
-def distance_image(mesh: Any, gt_mesh: Any, K: np.ndarray, c2w: np.ndarray, h: int, w: int) -> np.ndarray:
-    """(H, W) distance (m) from the surface of ``mesh`` seen at each pixel to ``gt_mesh``; NaN where the
-    ray hits nothing."""
+def _raycasting_scene(mesh: Any) -> Any:
+    import open3d as o3d
+
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(np.asarray(mesh.vertices, np.float32)), o3d.core.Tensor(np.asarray(mesh.faces, np.uint32)))
+    return scene
+
+
+def distance_image(mesh: Any, gt_scene: Any, K: np.ndarray, c2w: np.ndarray, h: int, w: int) -> np.ndarray:
+    """(H, W) distance (m) from the surface of ``mesh`` seen at each pixel to the GT mesh (``gt_scene``:
+    its :func:`_raycasting_scene`, built once per figure panel); NaN where the ray hits nothing."""
     import open3d as o3d
 
     from metrics.culling import render_depth_maps
 
     depth = render_depth_maps(mesh, K[None], c2w[None], h, w)[0]
     pts = _backproject(depth, K, c2w)
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(np.asarray(gt_mesh.vertices, np.float32)), o3d.core.Tensor(np.asarray(gt_mesh.faces, np.uint32)))
-    d = scene.compute_distance(o3d.core.Tensor(pts.reshape(-1, 3).astype(np.float32))).numpy().reshape(h, w)
+    d = gt_scene.compute_distance(o3d.core.Tensor(pts.reshape(-1, 3).astype(np.float32))).numpy().reshape(h, w)
     return np.where(depth > 0, d, np.nan)
 
 
@@ -56,8 +62,7 @@ def shaded_image(mesh: Any, K: np.ndarray, c2w: np.ndarray, h: int, w: int) -> n
     """(H, W) grey shading |n . view ray| of ``mesh`` (0 where nothing is hit)."""
     import open3d as o3d
 
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(np.asarray(mesh.vertices, np.float32)), o3d.core.Tensor(np.asarray(mesh.faces, np.uint32)))
+    scene = _raycasting_scene(mesh)
     u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
     dirs = np.stack([u, v, np.ones_like(u)], -1) @ np.linalg.inv(K).T @ c2w[:3, :3].T
     dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
@@ -89,6 +94,7 @@ def reconstruction_figure(report: Any, out_dir: Path, cache_dir: Path | None = N
     for label, scene_name, rows in panels:
         scene = load_dataset(scene_name, report.scale, cache_dir or DEFAULT_CACHE)
         gt = scene.load_gt_mesh()
+        gt_scene = _raycasting_scene(gt)
         views = scene.view_indices("train")
         cams = [int(views[0]), int(views[len(views) // 2])]
         for j, v in enumerate(cams):
@@ -99,7 +105,7 @@ def reconstruction_figure(report: Any, out_dir: Path, cache_dir: Path | None = N
         for row_label, path in rows:
             mesh = trimesh.load(path, force="mesh", process=False)
             for j, v in enumerate(cams):
-                d = distance_image(mesh, gt, scene.intrinsics[v], scene.cam_to_world[v], scene.height, scene.width)
+                d = distance_image(mesh, gt_scene, scene.intrinsics[v], scene.cam_to_world[v], scene.height, scene.width)
                 ax[k, j].set_facecolor("0.6")
                 im = ax[k, j].imshow(np.clip(d, 0, VMAX_M), cmap="viridis", vmin=0, vmax=VMAX_M)
                 ok = np.isfinite(d)
@@ -162,7 +168,9 @@ def prior_error_maps(scene: Any, views: np.ndarray) -> np.ndarray:
     return out
 
 
-def _grid_png(cells: list[list[tuple[np.ndarray, str, dict[str, Any]]]], ylabels: list[str]) -> bytes:
+def grid_png(cells: list[list[tuple[np.ndarray, str, dict[str, Any]]]], ylabels: list[str] | None = None) -> bytes:
+    """PNG of a grid of images: ``cells[row][col] = (image, title, imshow keywords)``; ``ylabels`` name the
+    rows. Shared by the report figures and the per-job previews (:mod:`bench.artifacts`)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -178,7 +186,8 @@ def _grid_png(cells: list[list[tuple[np.ndarray, str, dict[str, Any]]]], ylabels
                 img, title, kw = row[j]
                 ax[i, j].imshow(img, **kw)
                 ax[i, j].set_title(title, fontsize=7)
-        ax[i, 0].set_ylabel(textwrap.fill(ylabels[i], 22), fontsize=7)
+        if ylabels:
+            ax[i, 0].set_ylabel(textwrap.fill(ylabels[i], 22), fontsize=7)
     fig.tight_layout()
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=80)
@@ -206,7 +215,7 @@ def uncertainty_figure(report: Any, out_dir: Path, cache_dir: Path | None = None
                               (unc[i], "estimated uncertainty", {"cmap": "inferno", "vmin": 0, "vmax": 1}),
                               (np.clip(err[k], 0, 0.3), "true prior error 0-30 cm", {"cmap": "inferno", "vmin": 0, "vmax": 0.3})])
                 labels.append(f"{g.label}: {label}")
-    return _grid_png(cells, labels) if cells else None
+    return grid_png(cells, labels) if cells else None
 
 
 def renders_figure(report: Any, out_dir: Path, cache_dir: Path | None = None) -> bytes | None:
@@ -234,4 +243,4 @@ def renders_figure(report: Any, out_dir: Path, cache_dir: Path | None = None) ->
                         row.append((np.where(gt_d > 0, gt_d, np.nan), "GT depth", kw))
             cells.append(row)
             labels.append(f"{g.label}: {label}")
-    return _grid_png(cells, labels) if cells else None
+    return grid_png(cells, labels) if cells else None
