@@ -170,13 +170,24 @@ def evaluate_snapshot(snapshot: Snapshot, scene: Scene, protocol: str, scale: st
 
         params = protocol_params(protocol, scale)
         d = _cached_gt("dtu", scene, params, (seed,), lambda: dtu_setup(scene, params, seed))
-        r = dtu_chamfer(snapshot.mesh, d["gt_points"], d["K"], d["c2w"], scene.height, scene.width, d["params"],
+        mesh = snapshot.mesh
+        cull = str(params.get("cull", "none"))
+        if cull == "monosdf":  # MonoSDF's cull_scan: every view's 12 px-dilated object mask (metrics/mask_cull.py)
+            from bench.formats.dtu import object_masks
+            from metrics.mask_cull import cull_mesh_by_masks, dilation_radius
+
+            mesh = cull_mesh_by_masks(mesh, object_masks(scene), scene.intrinsics, scene.cam_to_world, dilation_radius(scene.width))
+        elif cull != "none":
+            raise BenchInputError(PROTOCOLS_FILE, f"dtu.cull must be 'none' or 'monosdf', got {cull!r}")
+        r = dtu_chamfer(mesh, d["gt_points"], d["K"], d["c2w"], scene.height, scene.width, d["params"],
                         gt_depth_maps=d["depth"], bbox=d["bbox"], ground_plane=d["plane"], seed=seed)
         out = {"cd": r.chamfer, "acc": r.d2s, "comp": r.s2d}
         return {k: float(v) for k, v in out.items() if np.isfinite(v)}
     if protocol == "llff":
         from metrics.image import psnr, ssim
 
+        params = protocol_params(protocol, scale)
         test = scene.view_indices("test")
-        return {"psnr": float(psnr(snapshot.renders, scene.images[test]).mean), "ssim": float(ssim(snapshot.renders, scene.images[test]).mean)}
+        return {"psnr": float(psnr(snapshot.renders, scene.images[test]).mean),
+                "ssim": float(ssim(snapshot.renders, scene.images[test], padding=str(params["ssim_padding"])).mean)}
     raise BenchInputError(f"protocol {protocol!r}", f"not supported by the evaluator yet {SUPPORTED_PROTOCOLS}")

@@ -8,10 +8,18 @@ As FSGS / RegNeRF evaluate saved PNGs, both images are first quantised to 8 bits
   (default 100 dB). Any image pair that is not identical after quantisation but would exceed the cap
   (a single 8-bit step on one channel of a >= 200k-pixel image) is capped too: 100 dB reads as
   "identical up to 8-bit rounding". Real reconstructions score 10-40 dB, so the cap never binds there.
-* SSIM per image: ``kornia.metrics.ssim`` with an 11 x 11 Gaussian window, sigma 1.5, C1 = (0.01)^2,
-  C2 = (0.03)^2, 'valid' padding (the map is averaged only where the window fits, which is what
-  scikit-image's ``structural_similarity(gaussian_weights=True, sigma=1.5, use_sample_covariance=False,
-  data_range=1)`` does by cropping the border); mean over pixels and channels.
+* SSIM per image: an 11 x 11 Gaussian window, sigma 1.5, C1 = (0.01)^2, C2 = (0.03)^2, mean over pixels
+  and channels, in one of two border conventions (``padding``):
+
+  - ``"valid"`` (``kornia.metrics.ssim(padding="valid")``): the map is averaged only where the window
+    fits, which is what scikit-image's ``structural_similarity(gaussian_weights=True, sigma=1.5,
+    use_sample_covariance=False, data_range=1)`` does by cropping the border;
+  - ``"zero"`` (FSGS / 3DGS ``utils/loss_utils.py``: ``F.conv2d(..., padding=window // 2)``): the moments
+    are filtered with zero padding and the map is averaged over the whole image. The borders see dark
+    pixels, so the border SSIM differs; at 128 x 96 the two conventions differ by 0.02-0.08 on the same
+    images (0.005 at 504 x 378). The LLFF protocol uses this one (the paper's Table 3 numbers come from
+    FSGS's evaluation; ``configs/protocols.yaml``).
+
   Constant images are fine (C1, C2 regularise): two equal constants give SSIM = 1.
 
 Both return :class:`ImageScores` (per-image values and their mean).
@@ -103,10 +111,13 @@ def psnr(pred: Any, target: Any, quantize: bool = True, max_db: float = 100.0) -
     return ImageScores(per_image=arr, mean=float(arr.mean()))
 
 
+SSIM_PADDINGS = ("valid", "zero")
+
+
 def ssim(
-    pred: Any, target: Any, quantize: bool = True, window_size: int = 11, sigma: float = 1.5
+    pred: Any, target: Any, quantize: bool = True, window_size: int = 11, sigma: float = 1.5, padding: str = "valid"
 ) -> ImageScores:
-    """Structural similarity per image (Gaussian 11 x 11 window, sigma 1.5, 'valid' region).
+    """Structural similarity per image (Gaussian 11 x 11 window, sigma 1.5).
 
     Args:
         pred: (N, H, W, 3) or (H, W, 3) float RGB in [0, 1]; H, W >= ``window_size``.
@@ -114,6 +125,8 @@ def ssim(
         quantize: quantise both to 8 bits first (default).
         window_size: odd Gaussian window size (11).
         sigma: Gaussian sigma in pixels (1.5; kornia's ssim fixes 1.5, so only 1.5 is accepted).
+        padding: ``"valid"`` (scikit-image / kornia, border cropped) or ``"zero"`` (FSGS: zero padding,
+            whole image); see the module docstring.
 
     Returns:
         :class:`ImageScores` (per-image SSIM in [-1, 1], mean).
@@ -126,10 +139,45 @@ def ssim(
         raise ValueError(f"sigma must be 1.5 (kornia.metrics.ssim uses a fixed sigma), got {sigma}")
     if p.shape[-1] < ws or p.shape[-2] < ws:
         raise ValueError(f"images must be at least {ws} x {ws} pixels, got {tuple(p.shape[-2:])}")
+    if padding not in SSIM_PADDINGS:
+        raise ValueError(f"padding must be one of {SSIM_PADDINGS}, got {padding!r}")
     if quantize:
         p, t = quantize_8bit(p), quantize_8bit(t)
     import kornia
 
-    smap = kornia.metrics.ssim(p, t, window_size=ws, max_val=1.0, padding="valid")  # [N, 3, h, w]
+    if padding == "valid":
+        smap = kornia.metrics.ssim(p, t, window_size=ws, max_val=1.0, padding="valid")  # [N, 3, h, w]
+    else:
+        smap = gaussian_ssim_map(p, t, ws, float(sigma), padding="zero")  # [N, 3, H, W]
     arr = smap.mean(dim=(1, 2, 3)).numpy().astype(np.float64)
     return ImageScores(per_image=arr, mean=float(arr.mean()))
+
+
+def gaussian_ssim_map(p: torch.Tensor, t: torch.Tensor, window_size: int = 11, sigma: float = 1.5, padding: str = "zero") -> torch.Tensor:
+    """SSIM map with a Gaussian window, differentiable (also the Gaussian variants' training loss).
+
+    Args:
+        p, t: (N, C, H, W) float images in [0, 1].
+        padding: ``"zero"`` (FSGS / 3DGS ``utils/loss_utils.py``: moments filtered with zero padding,
+            full (H, W) map) or ``"valid"`` (only where the window fits: (H - ws + 1, W - ws + 1)).
+
+    Returns:
+        (N, C, H', W') SSIM map (C1 = 0.01^2, C2 = 0.03^2).
+    """
+    import torch.nn.functional as F
+
+    g = torch.exp(-((torch.arange(window_size, dtype=p.dtype, device=p.device) - window_size // 2) ** 2) / (2 * sigma * sigma))
+    g = g / g.sum()
+    C = p.shape[1]
+    k = (g[:, None] * g[None, :])[None, None].expand(C, 1, window_size, window_size).contiguous()
+    pad = window_size // 2 if padding == "zero" else 0
+
+    def f(x: torch.Tensor) -> torch.Tensor:
+        return F.conv2d(x, k, padding=pad, groups=C)
+
+    mu_p, mu_t = f(p), f(t)
+    s_pp = f(p * p) - mu_p ** 2
+    s_tt = f(t * t) - mu_t ** 2
+    s_pt = f(p * t) - mu_p * mu_t
+    c1, c2 = 0.01 ** 2, 0.03 ** 2
+    return ((2 * mu_p * mu_t + c1) * (2 * s_pt + c2)) / ((mu_p ** 2 + mu_t ** 2 + c1) * (s_pp + s_tt + c2))

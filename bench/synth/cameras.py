@@ -105,3 +105,44 @@ def forward_grid(
             eye = centre + np.array([dx, 0.0, dz]) + rng.normal(0, jitter, 3)
             poses.append(look_at(eye, target))
     return np.stack(poses)
+
+
+def handheld_forward(
+    centre: np.ndarray,
+    n_views: int,
+    extent: tuple[float, float],
+    look_distance: float,
+    rng: np.random.Generator,
+    rows: int = 3,
+    position_jitter: float = 0.1,
+    look_jitter_deg: float = 2.0,
+) -> np.ndarray:
+    """A hand-held forward-facing sweep (LLFF captures: a person moving a phone over a patch in front of
+    the scene): ``n_views`` positions on a serpentine over a ``extent = (width, height)`` metre patch of the
+    x-z plane at ``centre`` (``rows`` passes, left-right then right-left), each displaced by
+    ``position_jitter`` x the row spacing (Gaussian), looking along +y at a point ``look_distance``
+    ahead, the look-at point jittered by ``look_jitter_deg`` degrees (a hand does not keep aim).
+
+    Frames are in capture order (the LLFF split takes every 8th as a test view, so test views fall
+    between training views along the path, as in the real captures).
+
+    Returns:
+        (n_views, 4, 4) camera-to-world poses.
+    """
+    width, height = float(extent[0]), float(extent[1])
+    rows = max(1, min(int(rows), n_views))
+    per_row = np.full(rows, n_views // rows)
+    per_row[: n_views % rows] += 1
+    spacing = height / max(rows - 1, 1)
+    poses = []
+    for r, count in enumerate(per_row):
+        xs = np.linspace(-width / 2, width / 2, int(count)) if count > 1 else np.zeros(1)
+        if r % 2 == 1:
+            xs = xs[::-1]
+        z = height / 2 - r * spacing if rows > 1 else 0.0
+        for x in xs:
+            eye = centre + np.array([x, 0.0, z]) + rng.normal(0.0, position_jitter * max(spacing, width / max(count, 1)), 3) * np.array([1.0, 0.3, 1.0])
+            aim = np.deg2rad(look_jitter_deg) * rng.normal(0.0, 1.0, 2)
+            target = eye + look_distance * np.array([np.tan(aim[0]), 1.0, np.tan(aim[1])])
+            poses.append(look_at(eye, target))
+    return np.stack(poses)

@@ -135,6 +135,52 @@ def make_plant(rng: np.random.Generator) -> tuple[trimesh.Trimesh, bool]:
     return _merge(parts), True
 
 
+def make_fern(rng: np.random.Generator) -> tuple[trimesh.Trimesh, bool]:
+    """Fern-like foliage (LLFF's fern / flower scenes): a pot and 7-10 arching fronds, each a thin rachis
+    (~1 cm) carrying 8-12 pairs of thin leaflets (6 -> 2 cm long, 3 mm thick) that overlap each other
+    from most viewpoints: thin structures with many depth layers and self-occlusion."""
+    pot_h = rng.uniform(0.18, 0.25)
+    pot = trimesh.creation.cylinder(radius=0.11, height=pot_h, sections=20)
+    pot.apply_translation([0, 0, pot_h / 2])
+    parts = [pot]
+    n_fronds = int(rng.integers(7, 11))
+    for k in range(n_fronds):
+        az = 2 * np.pi * k / n_fronds + rng.uniform(-0.25, 0.25)
+        tilt0, length = rng.uniform(0.2, 0.6), rng.uniform(0.4, 0.7)
+        out = np.array([np.cos(az), np.sin(az), 0.0])
+        side = np.array([-np.sin(az), np.cos(az), 0.0])
+        n_seg = 6
+        pts = [np.array([0.0, 0.0, pot_h])]
+        for j in range(1, n_seg + 1):  # the frond arches outwards and droops towards its tip
+            tilt = tilt0 + 0.9 * j / n_seg
+            d = np.sin(tilt) * out + np.cos(tilt) * np.array([0.0, 0.0, 1.0])
+            pts.append(pts[-1] + d * length / n_seg)
+        for a, b in zip(pts[:-1], pts[1:]):
+            parts.append(_rod(a, b, 0.004, sections=5))
+        n_pairs = int(rng.integers(8, 13))
+        for j in range(n_pairs):
+            u = (j + 1) / (n_pairs + 1)
+            seg = min(int(u * n_seg), n_seg - 1)
+            frac = u * n_seg - seg
+            at = pts[seg] + frac * (pts[seg + 1] - pts[seg])
+            axis = pts[seg + 1] - pts[seg]
+            axis = axis / np.linalg.norm(axis)
+            leaf_len = 0.06 - 0.04 * u
+            for sgn in (-1.0, 1.0):
+                direction = sgn * side + 0.35 * axis
+                direction = direction / np.linalg.norm(direction)
+                leaf = _box((leaf_len, 0.012, 0.003), (leaf_len / 2, 0.0, 0.0))
+                # local x -> direction, local y -> the frond's axis (leaflet blade in the frond's plane)
+                y_ax = axis - direction * float(axis @ direction)
+                y_ax = y_ax / np.linalg.norm(y_ax)
+                rot = np.eye(4)
+                rot[:3, 0], rot[:3, 1], rot[:3, 2] = direction, y_ax, np.cross(direction, y_ax)
+                rot[:3, 3] = at
+                leaf.apply_transform(rot)
+                parts.append(leaf)
+    return _merge(parts), True
+
+
 def make_cabinet(rng: np.random.Generator) -> tuple[trimesh.Trimesh, bool]:
     """A large box: big planar faces, no thin parts."""
     w, d, h = rng.uniform(0.8, 1.4), rng.uniform(0.4, 0.6), rng.uniform(0.8, 1.8)
@@ -170,6 +216,7 @@ FURNITURE = {
     "cabinet": make_cabinet,
     "sofa": make_sofa,
     "shelf": make_shelf,
+    "fern": make_fern,
 }
 
 PALETTE = {
@@ -180,6 +227,7 @@ PALETTE = {
     "cabinet": ((0.75, 0.70, 0.62), "wood"),
     "sofa": ((0.30, 0.35, 0.55), "fabric"),
     "shelf": ((0.60, 0.45, 0.30), "wood"),
+    "fern": ((0.25, 0.55, 0.18), "noise"),
     "mesh": ((0.70, 0.60, 0.55), "noise"),
 }
 

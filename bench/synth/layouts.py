@@ -30,6 +30,7 @@ from bench.synth.geometry import (
     place_on_floor,
 )
 from bench.synth.recipe import Recipe, check_number, resolve_mesh_path
+from bench.synth.shading import TEXTURES
 
 ROOM_PRESETS: dict[str, dict[str, Any]] = {
     # ScanNet: hand-held RGB-D sweeps of ordinary rooms; shaky trajectories.
@@ -215,28 +216,65 @@ def build_object(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layout
 
 
 def build_forward(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layout:
+    """LLFF-like forward-facing scene. Recipe keys (section ``forward:``, all optional): ``depth_range``
+    ([near, far] m of the objects' centres, default [1.6, 4.5]), ``back_wall`` (distance of the back
+    wall, m, default 6), ``lateral_spread`` (sideways spacing of the objects per metre of depth, default
+    0.22: smaller = more overlap), ``wall_texture`` / ``wall_texture_scale`` (default none / 0.5 m); an
+    object entry may fix its position with ``x`` (sideways) and ``y`` (depth), metres.
+    Cameras (``cameras:``): ``path: grid`` (default; ``grid``, ``spacing``) or ``path: handheld``
+    (``views``, ``extent`` [w, h] m, ``rows``, ``jitter``, ``look_jitter`` degrees; see
+    :func:`bench.synth.cameras.handheld_forward`), ``hfov``, ``look_distance``."""
     specs = _expand(recipe.raw.get("objects") or [{"type": "plant"}, {"type": "lamp"}, {"type": "chair"}, {"type": "table"}, {"type": "cabinet"}],
                     recipe.where())
-    far = 6.0
+    far = float(recipe.number("forward", "back_wall", scale=scale, default=6.0, lo=0.5, hi=100.0))
+    d_lo, d_hi = _number_list(recipe, ("forward", "depth_range"), scale, [1.6, 4.5], 2, lo=0.1, hi=100.0)
+    if not d_lo <= d_hi < far:
+        raise BenchInputError(recipe.where("forward", "depth_range"), f"need near <= far < back_wall {far:g} m, got {[d_lo, d_hi]}")
+    spread = float(recipe.number("forward", "lateral_spread", scale=scale, default=0.22, lo=0.0, hi=10.0))
+    wall_tex = str(recipe.get("forward", "wall_texture", scale=scale, default="none"))
+    if wall_tex not in TEXTURES:
+        raise BenchInputError(recipe.where("forward", "wall_texture"), f"must be one of {TEXTURES}, got {wall_tex!r}")
+    wall_scale = float(recipe.number("forward", "wall_texture_scale", scale=scale, default=0.5, lo=0.0, lo_open=True))
     objects = [
         SceneObject("ground", "floor", _box((8.0, far + 1, 0.05), (0.0, far / 2, -0.025)), True, False, _jitter_colour(rng, (0.5, 0.45, 0.4)), "tiles", 0.4),
-        SceneObject("back_wall", "wall", _box((8.0, 0.05, 4.0), (0.0, far, 2.0)), True, False, _jitter_colour(rng, (0.75, 0.75, 0.7)), "none", 0.5),
+        SceneObject("back_wall", "wall", _box((8.0, 0.05, 4.0), (0.0, far, 2.0)), True, False, _jitter_colour(rng, (0.75, 0.75, 0.7)), wall_tex,
+                    wall_scale),
     ]
-    depths = np.linspace(1.6, 4.5, len(specs)) + rng.uniform(-0.2, 0.2, len(specs))
+    depths = np.linspace(d_lo, d_hi, len(specs)) + rng.uniform(-0.2, 0.2, len(specs)) * (d_hi - d_lo) / 2.9
     counts: dict[str, int] = {}
     for i, (spec, y) in enumerate(zip(specs, depths)):
         mesh, category, thin = _make_object(recipe, spec, "", rng)
-        x = (i - (len(specs) - 1) / 2) * 0.55 * (y / 2.5) + rng.uniform(-0.1, 0.1)
+        x = (i - (len(specs) - 1) / 2) * spread * y + rng.uniform(-0.1, 0.1)
+        if "x" in spec:  # an explicit position (metres; x sideways, y depth) overrides the spread
+            x = float(check_number(spec["x"], recipe.where("objects", str(i), "x"), lo=-10.0, hi=10.0))
+        if "y" in spec:
+            y = float(check_number(spec["y"], recipe.where("objects", str(i), "y"), lo=0.1, hi=far))
         mesh = mesh.copy()
         mesh.apply_translation([x - mesh.bounds[:, 0].mean(), y - mesh.bounds[:, 1].mean(), 0.0])
         name = f"{category}_{counts.get(category, 0)}"
         counts[category] = counts.get(category, 0) + 1
         objects.append(_scene_object(name, category, mesh, thin, rng))
     width, height = _image_size(recipe, scale, {"tiny": [128, 96], "small": [256, 192], "medium": [504, 378], "large": [1008, 756]})
-    grid = tuple(int(v) for v in _number_list(recipe, ("cameras", "grid"), scale, [5, 4], 2, lo=1, integer=True))
-    spacing = _number_list(recipe, ("cameras", "spacing"), scale, [0.08, 0.06], 2, lo=0.0, lo_open=True)
     hfov = recipe.number("cameras", "hfov", scale=scale, default=60.0, lo=0.0, hi=170.0, lo_open=True)
-    poses = cams.forward_grid(np.array([0.0, 0.0, 1.0]), grid, spacing, look_distance=3.0, rng=rng)
+    look = float(recipe.number("cameras", "look_distance", scale=scale, default=3.0, lo=0.0, lo_open=True))
+    path = str(recipe.get("cameras", "path", scale=scale, default="grid"))
+    cam_height = float(recipe.number("cameras", "height", scale=scale, default=1.0, lo=0.0))
+    rig_centre = np.array([0.0, 0.0, cam_height])
+    if path == "grid":
+        grid = tuple(int(v) for v in _number_list(recipe, ("cameras", "grid"), scale, [5, 4], 2, lo=1, integer=True))
+        spacing = _number_list(recipe, ("cameras", "spacing"), scale, [0.08, 0.06], 2, lo=0.0, lo_open=True)
+        poses = cams.forward_grid(rig_centre, grid, spacing, look_distance=look, rng=rng)
+        info: dict[str, Any] = {"camera_path": "grid", "grid": list(grid), "spacing_m": list(spacing)}
+    elif path == "handheld":
+        n_views = int(recipe.number("cameras", "views", scale=scale, default=24, integer=True, lo=4, hi=1000))
+        extent = _number_list(recipe, ("cameras", "extent"), scale, [0.6, 0.3], 2, lo=0.0)
+        rows = int(recipe.number("cameras", "rows", scale=scale, default=3, integer=True, lo=1, hi=n_views))
+        jitter = float(recipe.number("cameras", "jitter", scale=scale, default=0.1, lo=0.0, hi=1.0))
+        look_jitter = float(recipe.number("cameras", "look_jitter", scale=scale, default=2.0, lo=0.0, hi=30.0))
+        poses = cams.handheld_forward(rig_centre, n_views, extent, look, rng, rows=rows, position_jitter=jitter, look_jitter_deg=look_jitter)
+        info = {"camera_path": "handheld", "views": n_views, "extent_m": list(extent), "rows": rows}
+    else:
+        raise BenchInputError(recipe.where("cameras", "path"), f"must be 'grid' or 'handheld', got {path!r}")
     n = len(poses)
     K = np.repeat(cams.intrinsics(width, height, hfov)[None], n, axis=0)
     # LLFF protocol (FSGS): images sorted by name, test = every 8th, 3 train views evenly spaced over the rest.
@@ -244,8 +282,9 @@ def build_forward(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layou
     rest = np.setdiff1d(np.arange(n), test)
     train = rest[np.round(np.linspace(0, len(rest) - 1, 3)).astype(int)]
     centre = np.array([0.0, far / 2, 1.0])
+    info.update(hfov_deg=hfov, object_depth_range_m=[float(d_lo), float(d_hi)], back_wall_m=far)
     return Layout(objects, K, poses, height, width, _sphere_scale_mat(centre, far / 2 + 1.0),
-                  splits={"train": train, "test": test}, info={"grid": list(grid), "spacing_m": list(spacing), "hfov_deg": hfov})
+                  splits={"train": train, "test": test}, info=info)
 
 
 BUILDERS = {"room": build_room, "object": build_object, "forward": build_forward}

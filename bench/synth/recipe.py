@@ -24,7 +24,10 @@ Room cameras (``cameras:``): ``views`` (int >= 2), ``hfov`` (degrees), ``jitter`
 ``height`` ([low, high] m), ``loop_radius`` (the hand-held loop's radii as a fraction of the room size,
 default 0.12: a small loop in the middle of the room, so the views' baselines are short against depths
 of 2-5 m). Object (DTU-like) cameras: ``distance``, ``hfov``, ``train_azimuths``, ``train_elevations``,
-``eval_views``; LLFF-like: ``grid``, ``spacing``, ``hfov``.
+``eval_views``; LLFF-like: ``path`` (``grid``: ``grid``, ``spacing``; ``handheld``: ``views``, ``extent``,
+``rows``, ``jitter``, ``look_jitter``), ``hfov``, ``look_distance``, ``height``; the LLFF-like layout
+itself under ``forward:`` (``depth_range``, ``back_wall``, ``lateral_spread``, ``wall_texture``,
+``wall_texture_scale``; :func:`bench.synth.layouts.build_forward`).
 """
 
 from __future__ import annotations
@@ -41,8 +44,8 @@ from bench.scene import DATASET_FORMATS, SCENE_KINDS
 
 SCALES = ("tiny", "small", "medium", "large")
 
-TOP_LEVEL_KEYS = {"name", "kind", "format", "seed", "preset", "description", "room", "objects", "object", "cameras", "image", "effects", "llff"}
-OBJECT_TYPES = ("table", "chair", "lamp", "plant", "cabinet", "sofa", "shelf", "mesh")
+TOP_LEVEL_KEYS = {"name", "kind", "format", "seed", "preset", "description", "room", "objects", "object", "cameras", "image", "effects", "llff", "forward"}
+OBJECT_TYPES = ("table", "chair", "lamp", "plant", "cabinet", "sofa", "shelf", "fern", "mesh")
 KIND_FORMATS = {"room": ("scannet", "replica"), "object": ("dtu",), "forward": ("llff",)}
 
 

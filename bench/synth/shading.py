@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-TEXTURES = ("none", "wood", "tiles", "fabric", "noise")
+TEXTURES = ("none", "wood", "tiles", "fabric", "noise", "grain")
+GRAIN_DIRECTIONS = tuple(v / np.linalg.norm(v) for v in (np.array([1.0, 0.45, 0.7]), np.array([-0.6, 1.0, 0.35]), np.array([0.3, -0.55, 1.0])))
 LIGHT_DIR = np.array([0.35, 0.25, 0.90]) / np.linalg.norm([0.35, 0.25, 0.90])
 AMBIENT, DIFFUSE = 0.45, 0.55
 
@@ -47,6 +48,12 @@ def texture_factor(name: str, points: np.ndarray, scale: float, phase: float) ->
             f = k * (2.0**octave)
             acc += (0.5**octave) * np.sin(f * x + phase * (octave + 1)) * np.sin(f * y + 0.7 * phase) * np.sin(f * z + 1.7)
         return 0.85 + 0.18 * acc
+    if name == "grain":  # fine isotropic detail on any plane: sines along 3 oblique directions per octave
+        acc = np.zeros(len(points))
+        for octave in range(4):
+            for d in GRAIN_DIRECTIONS:
+                acc += (0.6**octave) * np.sin((k * 2.0**octave) * (points @ d) + phase * (octave + 1) + 1.3 * octave)
+        return 0.85 + 0.09 * acc
     raise ValueError(f"unknown texture {name!r}; known: {TEXTURES}")
 
 

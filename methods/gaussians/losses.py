@@ -9,24 +9,13 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
+from metrics.image import gaussian_ssim_map
+
 
 def ssim_map(x: torch.Tensor, y: torch.Tensor, window: int = 11, sigma: float = 1.5) -> torch.Tensor:
-    """SSIM map (valid region) of two (H, W, 3) images with a Gaussian window (C1 = 0.01^2, C2 = 0.03^2)."""
-    g = torch.exp(-((torch.arange(window, dtype=x.dtype) - window // 2) ** 2) / (2 * sigma * sigma))
-    g = g / g.sum()
-    k = (g[:, None] * g[None, :])[None, None].repeat(3, 1, 1, 1)
-    a = x.permute(2, 0, 1)[None]
-    b = y.permute(2, 0, 1)[None]
-
-    def f(t: torch.Tensor) -> torch.Tensor:
-        return F.conv2d(t, k, groups=3)
-
-    mu_a, mu_b = f(a), f(b)
-    saa = f(a * a) - mu_a ** 2
-    sbb = f(b * b) - mu_b ** 2
-    sab = f(a * b) - mu_a * mu_b
-    c1, c2 = 0.01 ** 2, 0.03 ** 2
-    return ((2 * mu_a * mu_b + c1) * (2 * sab + c2)) / ((mu_a ** 2 + mu_b ** 2 + c1) * (saa + sbb + c2))
+    """SSIM map (valid region) of two (H, W, 3) images with a Gaussian window (C1 = 0.01^2, C2 = 0.03^2):
+    :func:`metrics.image.gaussian_ssim_map` with ``padding="valid"``, shape (1, 3, H - 10, W - 10)."""
+    return gaussian_ssim_map(x.permute(2, 0, 1)[None], y.permute(2, 0, 1)[None], window, sigma, padding="valid")
 
 
 def photometric_loss(render: torch.Tensor, target: torch.Tensor, lambda_dssim: float = 0.2) -> torch.Tensor:

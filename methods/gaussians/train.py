@@ -33,6 +33,7 @@ from methods.base import Artifacts, Snapshot
 from methods.gaussians import losses
 from methods.gaussians.model import init_params, init_points_from_views, render
 from methods.gaussians.strategy import DefaultStrategy
+from metrics.image import psnr
 
 PARAM_LR_KEYS = {"means": "lr_means", "scales": "lr_scales", "quats": "lr_quats", "opacities": "lr_opacities", "sh0": "lr_sh0", "shN": "lr_shN"}
 
@@ -71,7 +72,9 @@ def train_gaussians(scene: Scene, cfg: dict[str, Any], seed: int, progress: Call
     t0 = time.perf_counter()
     pts, cols, counts = init_points_from_views(scene.images[train], scene.intrinsics[train], scene.cam_to_world[train], near, far,
                                                n_depths=int(cfg["init_depths"]), n_random=int(cfg["init_random"]),
-                                               max_sweep_points=int(cfg["init_max_points"]), rng=rng)
+                                               max_sweep_points=int(cfg["init_max_points"]), rng=rng,
+                                               cost_ratio=float(cfg.get("init_cost_ratio", 0.3)), cost=str(cfg.get("init_cost", "zero_mean")),
+                                               all_views=bool(cfg.get("init_all_views", True)))
     centres = scene.cam_to_world[train][:, :3, 3]
     # footprint cap: sigma <= init_max_px pixels at the point's distance from the nearest training camera
     cam_dist = np.linalg.norm(pts[:, None, :] - centres[None], axis=-1).min(1)
@@ -163,6 +166,9 @@ def train_gaussians(scene: Scene, cfg: dict[str, Any], seed: int, progress: Call
                 renders = np.stack([o["color"].clamp(0, 1).numpy() for o in outs])
                 depths = np.stack([torch.where(o["alpha"] >= 0.5, o["depth"] / o["alpha"].clamp_min(1e-6), torch.zeros_like(o["alpha"])).numpy()
                                    for o in outs])  # expected z-depth where the view is covered (as _render_depths)
+                train_renders = np.stack([render(params, viewmats[v], Ks[v], W, H, deg, bg, **rkw)["color"].clamp(0, 1).numpy() for v in train])
+            # few-shot overfitting, measured: PSNR on the training views beside the test views' (README "Table 3 scenes")
+            extra.setdefault("train_psnr", []).append(float(psnr(train_renders, scene.images[train]).mean))
             timings["render"] += time.perf_counter() - t
             snapshots.append(Snapshot(fraction=snap_steps[step + 1], iterations=step + 1, seconds=train_seconds + timings["init"] + timings["uncertainty"],
                                       renders=renders.astype(np.float32), depths=depths.astype(np.float32)))

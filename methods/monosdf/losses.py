@@ -55,7 +55,7 @@ def solve_scale_shift(pred: torch.Tensor, target: torch.Tensor, weight: torch.Te
 
 
 def ssi_depth_fit(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor,
-                  negative_scale: str = "keep") -> tuple[torch.Tensor, torch.Tensor]:
+                  negative_scale: str = "keep", fixed_scale: float | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """Scale-and-shift-invariant depth loss (MonoSDF) and its fitted scale: align the rendered depth to
     the prior in closed form, then the weighted mean squared residual in prior units.
 
@@ -66,12 +66,19 @@ def ssi_depth_fit(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor
             anti-correlated with the prior, e.g. the initial sphere early in training) gives loss 0 for
             this batch, instead of a gradient that pushes the depth towards the mirrored (negative-scale)
             solution, which the scale-and-shift-invariant loss rates as good as the right one.
+        fixed_scale: a DIAGNOSTIC, not MonoSDF: no fit, ``scale = fixed_scale`` and shift 0 (a metric
+            depth loss; meaningful only for a metric prior such as the exact GT depth, with the scene's
+            metres per normalised unit). It tests whether the scale-and-shift ambiguity is what holds a
+            run back (docs/monosdf.md, session 7).
 
     Returns:
         (scalar loss (0 when no ray is valid), the fitted scale (detached)).
     """
     w = weight * (target > 0).to(weight.dtype)
-    s, t = solve_scale_shift(pred, target, w)
+    if fixed_scale is None:
+        s, t = solve_scale_shift(pred, target, w)
+    else:
+        s, t = torch.tensor(float(fixed_scale), dtype=pred.dtype), torch.zeros((), dtype=pred.dtype)
     res = s * pred + t - target
     loss = (w * res * res).sum() / w.sum().clamp_min(1.0)
     if negative_scale == "drop":

@@ -163,7 +163,11 @@ class MonoSDFTrainer:
         terms: dict[str, tuple[float, torch.Tensor]] = {}
         w = self.prior_weight[view, pixels]
         if self.prior_depth is not None and cfg["depth_weight"] > 0:
-            loss, scale = ssi_depth_fit(out.depth, self.prior_depth[view, pixels], w, str(cfg.get("depth_negative_scale", "keep")))
+            mode = str(cfg.get("depth_fit", "ssi"))
+            if mode not in ("ssi", "metric"):
+                raise ValueError(f"depth_fit must be 'ssi' (MonoSDF) or 'metric' (diagnostic), got {mode!r}")
+            loss, scale = ssi_depth_fit(out.depth, self.prior_depth[view, pixels], w, str(cfg.get("depth_negative_scale", "keep")),
+                                        fixed_scale=self.rays.scale if mode == "metric" else None)
             terms["depth"] = (float(cfg["depth_weight"]) * self._warmup("depth_warmup"), loss)
             self._depth_scales.append(float(scale))  # prior units per normalised unit (exact metric prior: the scene scale)
         if self.prior_normal is not None and cfg["normal_weight"] > 0:

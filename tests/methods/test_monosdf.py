@@ -398,3 +398,20 @@ def test_beta_floor_decays_linearly_to_beta_min(tiny_scene):
         assert float(tr.density.beta()) >= tr.density.beta_min
     np.testing.assert_allclose(mins, [1e-4 + 0.08 * max(0.0, 1 - k / 4) for k in range(6)], atol=1e-9)
     assert _trainer(tiny_scene).density.beta_min == pytest.approx(1e-4)
+
+
+def test_metric_depth_fit_diagnostic_pins_the_scale():
+    """``depth_fit: metric`` (diagnostic): no fit, scale fixed, shift 0: an affine copy of the prior that the
+    scale-and-shift-invariant loss accepts is penalised; the exact match is not; gradients are finite."""
+    from methods.monosdf.losses import ssi_depth_fit
+
+    prior = torch.linspace(1.0, 4.0, 64)
+    w = torch.ones(64)
+    exact = (prior / 3.15).requires_grad_(True)
+    shrunk = (0.9 * prior / 3.15 + 0.05).requires_grad_(True)
+    assert float(ssi_depth_fit(shrunk, prior, w)[0]) < 1e-8  # SSI: the shrunk copy is as good as the truth
+    loss_exact, s = ssi_depth_fit(exact, prior, w, fixed_scale=3.15)
+    loss_shrunk, _ = ssi_depth_fit(shrunk, prior, w, fixed_scale=3.15)
+    assert float(loss_exact) < 1e-10 and float(s) == pytest.approx(3.15) and float(loss_shrunk) > 1e-3
+    loss_shrunk.backward()
+    assert torch.isfinite(shrunk.grad).all() and float(shrunk.grad.abs().sum()) > 0

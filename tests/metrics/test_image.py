@@ -66,3 +66,32 @@ def test_errors():
         ssim(a, a)
     with pytest.raises(ValueError, match="NaN"):
         psnr(np.full((8, 8, 3), np.nan), a)
+
+
+def _fsgs_ssim_reference(x: np.ndarray, y: np.ndarray) -> float:
+    """The slow twin: FSGS's utils/loss_utils.py ``_ssim`` written out (a full 11 x 11 Gaussian window, one
+    ``F.conv2d`` with ``padding=5`` of zeros per moment, mean over the whole map), on 8-bit-quantised images."""
+    q = lambda a: torch.from_numpy(np.round(np.clip(a, 0, 1) * 255) / 255).permute(2, 0, 1)[None]
+    a, b = q(x), q(y)
+    g = torch.exp(-((torch.arange(11, dtype=torch.float64) - 5) ** 2) / (2 * 1.5 ** 2))
+    g = g / g.sum()
+    w = (g[:, None] @ g[None, :])[None, None].expand(3, 1, 11, 11).contiguous()
+    conv = lambda im: torch.nn.functional.conv2d(im, w, padding=5, groups=3)
+    mu1, mu2 = conv(a), conv(b)
+    s11, s22, s12 = conv(a * a) - mu1 ** 2, conv(b * b) - mu2 ** 2, conv(a * b) - mu1 * mu2
+    c1, c2 = 0.01 ** 2, 0.03 ** 2
+    m = ((2 * mu1 * mu2 + c1) * (2 * s12 + c2)) / ((mu1 ** 2 + mu2 ** 2 + c1) * (s11 + s22 + c2))
+    return float(m.mean())
+
+
+def test_zero_padded_ssim_matches_fsgs_and_differs_from_valid():
+    a, b, _, _ = pair(3, n=2, h=48, w=64)
+    zero = ssim(b, a, padding="zero")
+    for i in range(2):
+        assert zero.per_image[i] == pytest.approx(_fsgs_ssim_reference(b[i], a[i]), abs=1e-10)
+    # the conventions differ at the border (small images: a large border fraction)
+    valid = ssim(b, a)
+    assert abs(zero.mean - valid.mean) > 1e-3
+    assert ssim(a, a, padding="zero").mean == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="padding"):
+        ssim(a, a, padding="reflect")
