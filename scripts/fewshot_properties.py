@@ -151,7 +151,8 @@ def main() -> None:
                                          train_psnr=("train_psnr", "mean"), test_psnr=("test_psnr", "mean"),
                                          gap_db=("gap_db", "mean"), gap_std=("gap_db", "std"), test_depth_err_m=("test_depth_err_m", "mean"))
     summary = summary.rename(columns={"views": "seeds"})
-    text = (f"# Few-shot scene properties ({args.method}, scale {args.scale}, seeds {args.seeds}, overrides {args.set})\n\n"
+    source = f"stored rows of {args.rows}" if args.rows else f"seeds {args.seeds}, overrides {args.set}"
+    text = (f"# Few-shot scene properties ({args.method}, scale {args.scale}, {source})\n\n"
             + summary.to_markdown(floatfmt=".3f") + "\n")
     (out / "properties.md").write_text(text)
     print(text)

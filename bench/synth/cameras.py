@@ -119,8 +119,9 @@ def handheld_forward(
 ) -> np.ndarray:
     """A hand-held forward-facing sweep (LLFF captures: a person moving a phone over a patch in front of
     the scene): ``n_views`` positions on a serpentine over a ``extent = (width, height)`` metre patch of the
-    x-z plane at ``centre`` (``rows`` passes, left-right then right-left), each displaced by
-    ``position_jitter`` x the row spacing (Gaussian), looking along +y at a point ``look_distance``
+    x-z plane at ``centre`` (``rows`` passes, left-right then right-left), each displaced by a Gaussian
+    of std ``position_jitter`` x the larger of the row and column spacings (30 % of that along the
+    viewing direction, +y), looking along +y at a point ``look_distance``
     ahead, the look-at point jittered by ``look_jitter_deg`` degrees (a hand does not keep aim).
 
     Frames are in capture order (the LLFF split takes every 8th as a test view, so test views fall

@@ -291,3 +291,19 @@ def test_table_outputs_are_all_or_nothing_on_a_full_disk(tmp_path, monkeypatch):
     monkeypatch.setattr(atomic.os, "fdopen", real_fdopen)
     atomic.atomic_write_many(files)
     assert all(p.read_bytes() == b"x" * 10 for p in files)
+
+
+def test_atomic_writes_get_the_usual_file_mode(tmp_path: Path) -> None:
+    """Files written through a temporary (mkstemp: 0600) end with the mode open() would give (0666 - umask)."""
+    import os
+
+    from bench.atomic import atomic_write_bytes, atomic_write_many
+
+    umask = os.umask(0o022)
+    try:
+        atomic_write_bytes(tmp_path / "a.png", b"x")
+        atomic_write_many({tmp_path / "b.md": b"y"})
+    finally:
+        os.umask(umask)
+    assert (tmp_path / "a.png").stat().st_mode & 0o777 == 0o644
+    assert (tmp_path / "b.md").stat().st_mode & 0o777 == 0o644
