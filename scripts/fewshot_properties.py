@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 
-def test_coverage(scene) -> tuple[float, float]:
+def coverage_of_test_views(scene) -> tuple[float, float]:
     """(fraction of test pixels seen by < 2 training views, median max disparity in px) from GT depth."""
     from bench.scene import backproject_depth
 
@@ -121,7 +121,7 @@ def main() -> None:
     rows = []
     for name in args.scenes:
         scene = load_dataset(name, args.scale)
-        unseen, disp = test_coverage(scene)
+        unseen, disp = coverage_of_test_views(scene)
         test = scene.view_indices("test")
         print(f"[{name}] {scene.num_views} views, train {scene.view_indices('train').tolist()}, test {test.tolist()}: "
               f"test pixels seen by < 2 training views {unseen:.3f}, median max disparity {disp:.1f} px", flush=True)
