@@ -115,7 +115,9 @@ def dtu_setup(scene: Scene, params: dict[str, Any], seed: int) -> dict[str, Any]
       (dense) views see;
     * observation mask: the same views, with the full GT mesh's depth for occlusion;
     * ground plane P: the scene's ``ground_plane`` raised by ``ground_offset_frac x max_dist``, so
-      s2d runs over the object's GT points only (DTU's ``stl_above``).
+      s2d runs over the object's GT points only (DTU's ``stl_above``);
+    * ``cull: monosdf``: every view's object mask, dilated by MonoSDF's 12 px scaled to the width
+      (``cull_masks``; None for ``cull: none``).
     """
     from metrics.culling import render_depth_maps
     from metrics.dtu import DTUParams, dtu_gt_points
@@ -132,12 +134,22 @@ def dtu_setup(scene: Scene, params: dict[str, Any], seed: int) -> dict[str, Any]
     bbox = np.stack([bounds[0] - dtu.patch, bounds[1] + dtu.patch])
     gt_mesh = scene.load_gt_mesh()
     region = _crop_to_box(gt_mesh, bbox[0] - dtu.patch, bbox[1] + 2 * dtu.patch)
+    cull = str(params.get("cull", "none"))
+    if cull not in ("none", "monosdf"):
+        raise BenchInputError(PROTOCOLS_FILE, f"dtu.cull must be 'none' or 'monosdf', got {cull!r}")
+    cull_masks = None
+    if cull == "monosdf":
+        from bench.formats.dtu import object_masks
+        from metrics.mask_cull import dilate_masks, dilation_radius
+
+        cull_masks = dilate_masks(object_masks(scene), dilation_radius(scene.width))
     plane = np.asarray(layout["ground_plane"], dtype=np.float64).copy()
     plane[3] -= float(params["ground_offset_frac"]) * dtu.max_dist * np.linalg.norm(plane[:3])
     return {
         "params": dtu, "bbox": bbox, "plane": plane, "K": K, "c2w": c2w,
         "gt_points": dtu_gt_points(region, K, c2w, scene.height, scene.width, dtu, seed=seed),
         "depth": render_depth_maps(gt_mesh, K, c2w, scene.height, scene.width),
+        "cull_masks": cull_masks,
     }
 
 
@@ -171,14 +183,10 @@ def evaluate_snapshot(snapshot: Snapshot, scene: Scene, protocol: str, scale: st
         params = protocol_params(protocol, scale)
         d = _cached_gt("dtu", scene, params, (seed,), lambda: dtu_setup(scene, params, seed))
         mesh = snapshot.mesh
-        cull = str(params.get("cull", "none"))
-        if cull == "monosdf":  # MonoSDF's cull_scan: every view's 12 px-dilated object mask (metrics/mask_cull.py)
-            from bench.formats.dtu import object_masks
-            from metrics.mask_cull import cull_mesh_by_masks, dilation_radius
+        if d["cull_masks"] is not None:  # MonoSDF's cull_scan: every view's dilated object mask (metrics/mask_cull.py)
+            from metrics.mask_cull import cull_mesh_by_masks
 
-            mesh = cull_mesh_by_masks(mesh, object_masks(scene), scene.intrinsics, scene.cam_to_world, dilation_radius(scene.width))
-        elif cull != "none":
-            raise BenchInputError(PROTOCOLS_FILE, f"dtu.cull must be 'none' or 'monosdf', got {cull!r}")
+            mesh = cull_mesh_by_masks(mesh, d["cull_masks"], scene.intrinsics, scene.cam_to_world, radius=None)
         r = dtu_chamfer(mesh, d["gt_points"], d["K"], d["c2w"], scene.height, scene.width, d["params"],
                         gt_depth_maps=d["depth"], bbox=d["bbox"], ground_plane=d["plane"], seed=seed)
         out = {"cd": r.chamfer, "acc": r.d2s, "comp": r.s2d}

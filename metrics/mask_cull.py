@@ -56,19 +56,17 @@ def vertices_kept(vertices: np.ndarray, masks: np.ndarray, K: np.ndarray, cam_to
     return keep
 
 
-def cull_mesh_by_masks(mesh: Any, masks: np.ndarray, K: np.ndarray, cam_to_world: np.ndarray, radius: int) -> Any:
+def cull_mesh_by_masks(mesh: Any, masks: np.ndarray, K: np.ndarray, cam_to_world: np.ndarray, radius: int | None) -> Any:
     """MonoSDF's ``cull_scan``: the mesh restricted to the vertices :func:`vertices_kept` accepts after
-    dilating ``masks`` (N, H, W) by ``radius`` px; faces with a dropped vertex are removed.
+    dilating ``masks`` (N, H, W) by ``radius`` px (None: ``masks`` are dilated already, e.g. cached once
+    per scene); faces with a dropped vertex are removed.
 
     Returns:
         A new ``trimesh.Trimesh`` (possibly empty).
     """
-    import trimesh
+    from metrics.culling import _keep_faces
 
-    keep = vertices_kept(np.asarray(mesh.vertices), dilate_masks(masks, radius), np.asarray(K, dtype=np.float64),
-                         np.asarray(cam_to_world, dtype=np.float64))
+    dilated = np.asarray(masks, dtype=bool) if radius is None else dilate_masks(masks, radius)
+    keep = vertices_kept(np.asarray(mesh.vertices), dilated, np.asarray(K, dtype=np.float64), np.asarray(cam_to_world, dtype=np.float64))
     faces = np.asarray(mesh.faces)
-    face_keep = keep[faces].all(axis=1) if len(faces) else np.zeros(0, dtype=bool)
-    out = trimesh.Trimesh(np.asarray(mesh.vertices), faces[face_keep], process=False)
-    out.remove_unreferenced_vertices()
-    return out
+    return _keep_faces(mesh, keep[faces].all(axis=1) if len(faces) else np.zeros(0, dtype=bool))

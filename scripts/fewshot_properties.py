@@ -69,6 +69,14 @@ def coverage_of_test_views(scene) -> tuple[float, float]:
     return float((counts < 2).mean()), float(np.median(np.concatenate(disparities)))
 
 
+def median_depth_error(depths: np.ndarray | None, gt: np.ndarray) -> float:
+    """Median |rendered z-depth - GT z-depth| (m) where both are > 0; NaN without a rendered depth."""
+    if depths is None:
+        return float("nan")
+    ok = (depths > 0) & (gt > 0)
+    return float(np.median(np.abs(depths[ok] - gt[ok]))) if ok.any() else float("nan")
+
+
 def _rows_from_table(root: Path, scale: str, method: str, name: str, scene, unseen: float, disp: float) -> list[dict]:
     """Property rows from stored result rows (``root/scale/jobs/*.json``) of ``method`` on scene ``name``."""
     import json
@@ -81,11 +89,7 @@ def _rows_from_table(root: Path, scale: str, method: str, name: str, scene, unse
             continue
         train_psnr = (row.get("extra") or {}).get("train_psnr") or []
         depth_file = root / scale / "artifacts" / row["job_id"] / "depths.npy"
-        derr = float("nan")
-        if depth_file.exists():
-            d, gt = np.load(depth_file), scene.gt_depth[test]
-            ok = (d > 0) & (gt > 0)
-            derr = float(np.median(np.abs(d[ok] - gt[ok]))) if ok.any() else float("nan")
+        derr = median_depth_error(np.load(depth_file) if depth_file.exists() else None, scene.gt_depth[test])
         for k, point in enumerate(row["curve"]):
             tp = train_psnr[k] if k < len(train_psnr) else float("nan")
             last = k == len(row["curve"]) - 1
@@ -134,9 +138,7 @@ def main() -> None:
             art = get_method(args.method).fit(scene, cfg, seed)
             for snap, train_psnr in zip(art.snapshots, art.extra.get("train_psnr", [np.nan] * len(art.snapshots))):
                 test_psnr = evaluate_snapshot(snap, scene, "llff", args.scale, seed)["psnr"]
-                gt = scene.gt_depth[test]
-                ok = (snap.depths > 0) & (gt > 0) if snap.depths is not None else np.zeros_like(gt, bool)
-                derr = float(np.median(np.abs(snap.depths[ok] - gt[ok]))) if ok.any() else float("nan")
+                derr = median_depth_error(snap.depths, scene.gt_depth[test])
                 rows.append({"scene": name, "seed": seed, "iterations": snap.iterations, "fraction": snap.fraction,
                              "train_psnr": train_psnr, "test_psnr": test_psnr, "gap_db": train_psnr - test_psnr,
                              "test_depth_err_m": derr, "unseen_frac": unseen, "disparity_px": disp,

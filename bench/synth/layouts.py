@@ -240,6 +240,7 @@ def build_forward(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layou
         SceneObject("back_wall", "wall", _box((8.0, 0.05, 4.0), (0.0, far, 2.0)), True, False, _jitter_colour(rng, (0.75, 0.75, 0.7)), wall_tex,
                     wall_scale),
     ]
+    # jitter +-0.2 m at the default 1.6-4.5 m range (2.9 m wide), proportional to the range otherwise
     depths = np.linspace(d_lo, d_hi, len(specs)) + rng.uniform(-0.2, 0.2, len(specs)) * (d_hi - d_lo) / 2.9
     counts: dict[str, int] = {}
     for i, (spec, y) in enumerate(zip(specs, depths)):

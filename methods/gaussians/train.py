@@ -73,8 +73,8 @@ def train_gaussians(scene: Scene, cfg: dict[str, Any], seed: int, progress: Call
     pts, cols, counts = init_points_from_views(scene.images[train], scene.intrinsics[train], scene.cam_to_world[train], near, far,
                                                n_depths=int(cfg["init_depths"]), n_random=int(cfg["init_random"]),
                                                max_sweep_points=int(cfg["init_max_points"]), rng=rng,
-                                               cost_ratio=float(cfg.get("init_cost_ratio", 0.3)), cost=str(cfg.get("init_cost", "zero_mean")),
-                                               all_views=bool(cfg.get("init_all_views", True)))
+                                               cost_ratio=float(cfg["init_cost_ratio"]), cost=str(cfg["init_cost"]),
+                                               all_views=bool(cfg["init_all_views"]))
     centres = scene.cam_to_world[train][:, :3, 3]
     # footprint cap: sigma <= init_max_px pixels at the point's distance from the nearest training camera
     cam_dist = np.linalg.norm(pts[:, None, :] - centres[None], axis=-1).min(1)

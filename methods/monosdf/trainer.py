@@ -83,6 +83,10 @@ class MonoSDFTrainer:
         self.prior_depth = self._prior(scene.mono_depth, (V, HW))
         self.prior_normal = self._prior(scene.mono_normal, (V, HW, 3))
         self.prior_weight = torch.ones(V, HW)
+        fit = str(cfg.get("depth_fit", "ssi"))
+        if fit not in ("ssi", "metric"):
+            raise ValueError(f"depth_fit must be 'ssi' (MonoSDF) or 'metric' (diagnostic), got {fit!r}")
+        self.depth_fixed_scale = self.rays.scale if fit == "metric" else None  # metric: the scene's metres per unit
         self.pixel_sampler: PixelSampler = lambda v, n, g: torch.randint(0, HW, (n,), generator=g)  # noqa: E731
         self.extra_losses: list[Callable[..., dict[str, tuple[float, torch.Tensor]]]] = []
 
@@ -163,11 +167,8 @@ class MonoSDFTrainer:
         terms: dict[str, tuple[float, torch.Tensor]] = {}
         w = self.prior_weight[view, pixels]
         if self.prior_depth is not None and cfg["depth_weight"] > 0:
-            mode = str(cfg.get("depth_fit", "ssi"))
-            if mode not in ("ssi", "metric"):
-                raise ValueError(f"depth_fit must be 'ssi' (MonoSDF) or 'metric' (diagnostic), got {mode!r}")
             loss, scale = ssi_depth_fit(out.depth, self.prior_depth[view, pixels], w, str(cfg.get("depth_negative_scale", "keep")),
-                                        fixed_scale=self.rays.scale if mode == "metric" else None)
+                                        fixed_scale=self.depth_fixed_scale)
             terms["depth"] = (float(cfg["depth_weight"]) * self._warmup("depth_warmup"), loss)
             self._depth_scales.append(float(scale))  # prior units per normalised unit (exact metric prior: the scene scale)
         if self.prior_normal is not None and cfg["normal_weight"] > 0:
