@@ -20,6 +20,7 @@ import json
 import math
 import multiprocessing as mp
 import os
+import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
@@ -121,7 +122,7 @@ def run_one(run: StudyRun, snapshots: int, stop_at: float = 1.0) -> list[dict[st
     if "diag_views" in cfg and not int(cfg["diag_views"]):
         cfg["diag_views"] = 4
     t0 = time.perf_counter()
-    artifacts = get_method(run.method).fit(scene, cfg, run.seed)
+    artifacts = get_method(run.method).fit(scene, cfg, run.seed, _progress_printer(run, t0))
     fit_s = time.perf_counter() - t0
     records = []
     for snap in artifacts.snapshots:
@@ -139,6 +140,20 @@ def run_one(run: StudyRun, snapshots: int, stop_at: float = 1.0) -> list[dict[st
         path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write_bytes(path, last.export(file_type="ply", encoding="binary"))
     return records
+
+
+def _progress_printer(run: StudyRun, t0: float, every: float = 0.1) -> Callable[[float, str], None]:
+    """A progress callback that prints one line per ``every`` of the schedule (stderr: the study's log),
+    so a long study shows where each run stands, not only when it ends."""
+    state = {"next": every}
+
+    def show(frac: float, msg: str) -> None:
+        if frac + 1e-9 >= state["next"]:
+            state["next"] = (int(frac / every + 1e-9) + 1) * every
+            label = f" value {json.dumps(run.sweep_value)}" if run.sweep_value is not None else ""
+            print(f"[study] seed {run.seed}{label}: {frac:4.0%} {msg} ({time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)
+
+    return show
 
 
 def _worker_init() -> None:

@@ -106,15 +106,18 @@ class SDFNetwork(torch.nn.Module):
         P = u.shape[0]
         return torch.cat([u, sin.reshape(P, -1), cos.reshape(P, -1)], dim=-1), sin, cos
 
-    def _pe_backward(self, g: torch.Tensor, sin: torch.Tensor | None, cos: torch.Tensor | None) -> torch.Tensor:
-        """d sdf / d u from the gradient ``g`` (P, 3 + 6F) w.r.t. the encoding (chain rule of :meth:`encode`)."""
-        out = g[:, :3]
+    def _pe_backward(self, g0: torch.Tensor, w_pe: torch.Tensor, sin: torch.Tensor | None, cos: torch.Tensor | None) -> torch.Tensor:
+        """d sdf / d u through the encoding (chain rule of :meth:`encode`): ``g0`` (P, H) is the gradient at
+        the first layer's pre-activation times its slope, ``w_pe`` (H, 3 + 6F) the first layer's weight
+        columns of the encoding. Each block (u, sin, cos) is its own small product ``g0 @ w_block``: slicing
+        one (P, 3 + 6F) product instead costs a zero-filled (P, 3 + 6F) buffer per slice in the backward."""
+        out = g0 @ w_pe[:, :3]
         if sin is None or cos is None:
             return out
         F_ = self.pe_frequencies
-        P = g.shape[0]
-        g_sin = g[:, 3 : 3 + 3 * F_].reshape(P, F_, 3)
-        g_cos = g[:, 3 + 3 * F_ :].reshape(P, F_, 3)
+        P = g0.shape[0]
+        g_sin = (g0 @ w_pe[:, 3 : 3 + 3 * F_]).reshape(P, F_, 3)
+        g_cos = (g0 @ w_pe[:, 3 + 3 * F_ :]).reshape(P, F_, 3)
         return out + ((g_sin * cos - g_cos * sin) * self.pe_freqs[None, :, None]).sum(1)
 
     def _geometric_init(self, n_grid: int, r: float, inside_out: bool) -> None:
@@ -160,11 +163,14 @@ class SDFNetwork(torch.nn.Module):
         grad = None
         if with_gradient:
             # explicit vector-Jacobian product of the SDF output (differentiable, first-order ops only)
+            # (the first layer's product is split by input block, grid / encoding: no slice of a (P, in) tensor)
             g = self.linears[-1].weight[0].expand_as(slopes[-1])
-            for lin, slope in zip(reversed(self.linears[:-1]), reversed(slopes)):
+            for lin, slope in zip(reversed(self.linears[1:-1]), reversed(slopes[1:])):
                 g = (g * slope) @ lin.weight  # (P, in)
+            g0 = g * slopes[0]  # (P, H): d sdf / d (first layer pre-activation)
+            w0 = self.linears[0].weight  # (H, L * F + 3 + 6 F_pe)
             c = jac.shape[-1]
-            grad = jacobian_contract(jac, g[:, :c], self.grid.fast) + self._pe_backward(g[:, c:], sin, cos)  # (P, 3); 1/R and x R cancel
+            grad = jacobian_contract(jac, g0 @ w0[:, :c], self.grid.fast) + self._pe_backward(g0, w0[:, c:], sin, cos)  # (P, 3); 1/R and x R cancel
         # bounding-sphere clamp (MonoSDF): every ray terminates inside the sphere
         norm = x.norm(dim=-1)
         sphere = self.radius - norm
@@ -175,9 +181,11 @@ class SDFNetwork(torch.nn.Module):
         return sdf, geo, grad
 
 
-def sdf_gradient_autograd(net: SDFNetwork, x: torch.Tensor) -> torch.Tensor:
-    """Slow, obviously-correct twin of the forward-mode gradient: ``torch.autograd.grad`` of the SDF
-    (through the reference grid path, which is differentiable w.r.t. x). (P, 3)."""
+def sdf_gradient_autograd(net: SDFNetwork, x: torch.Tensor, create_graph: bool = False) -> torch.Tensor:
+    """Slow, obviously-correct twin of the explicit gradient: ``torch.autograd.grad`` of the SDF
+    (through the reference grid path, which is differentiable w.r.t. x). (P, 3). ``create_graph``: the
+    result is differentiable w.r.t. the parameters (autograd's double backward: the twin of the
+    explicit gradient's own backward, which the eikonal and normal losses use)."""
     from methods.monosdf.grid import interpolate_reference
 
     x = x.detach().requires_grad_(True)
@@ -188,7 +196,7 @@ def sdf_gradient_autograd(net: SDFNetwork, x: torch.Tensor) -> torch.Tensor:
     for lin in net.linears[:-1]:
         a = F.softplus(lin(a), beta=SOFTPLUS_BETA)
     sdf = torch.minimum(net.linears[-1](a)[:, 0] * net.radius, net.radius - x.norm(dim=-1))
-    return torch.autograd.grad(sdf.sum(), x)[0]
+    return torch.autograd.grad(sdf.sum(), x, create_graph=create_graph)[0]
 
 
 class ColorNetwork(torch.nn.Module):

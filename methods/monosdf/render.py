@@ -29,7 +29,7 @@ class RenderOutput:
         rgb: (R, 3); depth: (R,) z-depth in normalised units; normal: (R, 3) camera frame (not
         normalised); acc: (R,) sum of weights; weights: (R, S); grad: (R, S, 3) SDF gradients at the
         samples; sdf: (R, S); t: (R, S) sample distances; extra_grad: (E, 3) SDF gradients at the
-        ``extra_points`` (None without).
+        ``extra_points`` (None without); kept: samples rendered with gradients (R * S unless pruned).
     """
 
     rgb: torch.Tensor
@@ -41,6 +41,7 @@ class RenderOutput:
     sdf: torch.Tensor
     t: torch.Tensor
     extra_grad: torch.Tensor | None = None
+    kept: int = 0
 
     def select(self, rows: slice | torch.Tensor) -> "RenderOutput":
         """The same outputs for a subset of the rays (``extra_grad`` is dropped: it is not per ray)."""
@@ -101,9 +102,11 @@ def sample_pdf(bins: torch.Tensor, weights: torch.Tensor, n: int, gen: torch.Gen
 @torch.no_grad()
 def hierarchical_samples(
     sdf_net: SDFNetwork, density: LaplaceDensity, origins: torch.Tensor, dirs: torch.Tensor, far: torch.Tensor,
-    near: float, n_coarse: int, n_fine: int, gen: torch.Generator | None, jitter: bool,
-) -> torch.Tensor:
-    """The sampler of the module docstring -> (R, n_coarse + n_fine) sorted distances (no gradient)."""
+    near: float, n_coarse: int, n_fine: int, gen: torch.Generator | None, jitter: bool, with_coarse_sdf: bool = False,
+) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
+    """The sampler of the module docstring -> (R, n_coarse + n_fine) sorted distances (no gradient);
+    ``with_coarse_sdf``: also the (R, n_coarse + n_fine) SDF the coarse pass computed, NaN at the fine
+    samples (``render_rays(prune_weight=...)`` then evaluates only those)."""
     R = dirs.shape[0]
     near_t = torch.full((R,), float(near))
     far_t = torch.maximum(far, near_t + 1e-3)
@@ -114,7 +117,11 @@ def hierarchical_samples(
     mids = 0.5 * (t_c[:, 1:] + t_c[:, :-1])
     bins = torch.cat([near_t[:, None], mids, far_t[:, None]], -1)
     t_f = sample_pdf(bins, w_c, n_fine, gen, jitter)
-    return torch.sort(torch.cat([t_c, t_f], -1), -1)[0]
+    t, order = torch.sort(torch.cat([t_c, t_f], -1), -1)
+    if not with_coarse_sdf:
+        return t
+    known = torch.cat([sdf_c.reshape(R, n_coarse), torch.full((R, n_fine), float("nan"))], -1)
+    return t, torch.gather(known, 1, order)
 
 
 @torch.no_grad()
@@ -149,6 +156,8 @@ def render_rays(
     extra_points: torch.Tensor | None = None,
     t: torch.Tensor | None = None,
     image: int | torch.Tensor | None = None,
+    prune_weight: float = 0.0,
+    coarse_sdf: torch.Tensor | None = None,
 ) -> RenderOutput:
     """Render R rays.
 
@@ -163,6 +172,14 @@ def render_rays(
             (e.g. to place eikonal points beside them); None = draw them here.
         image: training slot of the rays, an int or (R,) per ray (selects the colour network's per-image
             code; None = the mean code).
+        prune_weight: > 0 renders with gradients only the samples whose weight, from a no-gradient pass
+            over all samples, exceeds it (plus each ray's highest-weight sample); the others keep their
+            no-gradient SDF in the compositing (so transmittance is unchanged) and no colour / normal
+            (their weights are below ``prune_weight``). 0 = every sample with gradients (MonoSDF). Late in
+            training, when beta is small, most samples carry no weight (docs/monosdf.md, speed).
+            ``RenderOutput.grad`` is 0 at pruned samples; ``RenderOutput.kept`` counts the rendered ones.
+        coarse_sdf: (R, S) SDF already known at some samples (NaN elsewhere; ``hierarchical_samples(...,
+            with_coarse_sdf=True)``): the pruning pass evaluates only the unknown ones.
     """
     R = dirs.shape[0]
     origins = origins.expand(R, 3)
@@ -171,15 +188,40 @@ def render_rays(
     S = t.shape[1]
     pts = origins[:, None, :] + dirs[:, None, :] * t[..., None]
     flat = pts.reshape(-1, 3)
-    sdf, geo, grad = sdf_net(flat if extra_points is None else torch.cat([flat, extra_points]), with_gradient=True)
-    assert grad is not None
-    extra_grad = None if extra_points is None else grad[R * S:]
-    sdf, geo, grad = sdf[: R * S], geo[: R * S], grad[: R * S]  # the ray samples (views without extra points)
-    normals = F.normalize(grad, dim=-1, eps=1e-8)
+    keep = None
+    if prune_weight > 0:
+        with torch.no_grad():
+            if coarse_sdf is None:
+                sdf_all = sdf_net(flat, with_gradient=False)[0]
+            else:
+                sdf_all = coarse_sdf.reshape(-1).clone()
+                todo = sdf_all.isnan().nonzero().squeeze(1)
+                sdf_all[todo] = sdf_net(flat[todo], with_gradient=False)[0]
+            w_all = composite_weights(sdf_all.reshape(R, S), t, density)
+            mask = w_all > prune_weight
+            mask[torch.arange(R), w_all.argmax(-1)] = True
+            keep = mask.reshape(-1).nonzero().squeeze(1)  # (K,) flat sample indices rendered with gradients
+    pts_g = flat if keep is None else flat[keep]
+    n_g = pts_g.shape[0]
+    sdf_g, geo, grad_g = sdf_net(pts_g if extra_points is None else torch.cat([pts_g, extra_points]), with_gradient=True)
+    assert grad_g is not None
+    extra_grad = None if extra_points is None else grad_g[n_g:]
+    sdf_g, geo, grad_g = sdf_g[:n_g], geo[:n_g], grad_g[:n_g]  # the rendered samples (views without extra points)
+    normals_g = F.normalize(grad_g, dim=-1, eps=1e-8)
     view = dirs[:, None, :].expand(R, S, 3).reshape(-1, 3)
     if isinstance(image, torch.Tensor):
         image = image[:, None].expand(R, S).reshape(-1)
-    rgb_s = color_net(flat, view, normals, geo, image).reshape(R, S, 3)
+        if keep is not None:
+            image = image[keep]
+    rgb_g = color_net(pts_g, view if keep is None else view[keep], normals_g, geo, image)
+    if keep is None:
+        sdf, grad, normals, rgb_s = sdf_g, grad_g, normals_g, rgb_g
+    else:  # scatter the rendered samples into the full (R * S) layout; pruned ones: no-gradient SDF, 0 elsewhere
+        sdf = sdf_all.index_put((keep,), sdf_g)
+        grad = torch.zeros(R * S, 3).index_put((keep,), grad_g)
+        normals = torch.zeros(R * S, 3).index_put((keep,), normals_g)
+        rgb_s = torch.zeros(R * S, 3).index_put((keep,), rgb_g)
+    rgb_s = rgb_s.reshape(R, S, 3)
     sdf = sdf.reshape(R, S)
     w = composite_weights(sdf, t, density)
     acc = w.sum(-1)
@@ -191,4 +233,4 @@ def render_rays(
     else:
         n_cam = torch.einsum("rij,rj->ri", world_to_cam, n_world)
     return RenderOutput(rgb=rgb, depth=depth, normal=n_cam, acc=acc, weights=w, grad=grad.reshape(R, S, 3), sdf=sdf, t=t,
-                        extra_grad=extra_grad)
+                        extra_grad=extra_grad, kept=n_g)

@@ -43,6 +43,8 @@ def resolve_inside_out(value: Any, scene: Scene) -> bool:
     raise ValueError(f"inside_out must be true, false or 'auto', got {value!r}")
 
 
+PRUNE_WORTH = 0.75  # prune_weight: prune only while the last step had at most this fraction of samples above it
+                   # (the no-gradient pass over all samples costs ~15 % of a step: measured, docs/monosdf.md speed)
 WEIGHTED_SAMPLE = 1e-4  # a sample with a smaller rendering weight counts as empty space in ``samples_weighted``
 
 
@@ -111,6 +113,7 @@ class MonoSDFTrainer:
         self._log_sums: dict[str, float] = {}
         self._log_count = 0
         self._depth_scales: list[float] = []  # fitted depth scales since the last diagnostics()
+        self._prunable_frac = 1.0  # fraction of the last step's samples with weight > prune_weight
 
     def _prior(self, arr: np.ndarray | None, shape: tuple[int, ...]) -> torch.Tensor | None:
         if arr is None:
@@ -119,14 +122,15 @@ class MonoSDFTrainer:
 
     # ------------------------------------------------------------------ one step
     def render_pixels(self, view: int | torch.Tensor, pixels: torch.Tensor, jitter: bool = True, extra_points: torch.Tensor | None = None,
-                      t: torch.Tensor | None = None) -> RenderOutput:
+                      t: torch.Tensor | None = None, prune_weight: float = 0.0, coarse_sdf: torch.Tensor | None = None) -> RenderOutput:
         """Render ``pixels`` (flat indices) of training view slot ``view`` (0..V-1; or an (R,) slot per ray)
         with that image's appearance code; ``extra_points`` (E, 3): also their SDF gradients
         (``RenderOutput.extra_grad``); ``t``: distances from :func:`hierarchical_samples` (None = sample here)."""
         r = self.rays
         return render_rays(self.sdf, self.color, self.density, r.origins[view], r.dirs[view, pixels], r.z_factor[view, pixels],
                            r.far[view, pixels], r.world_to_cam_rot[view], self.cfg["near"], self.cfg["n_coarse"], self.cfg["n_fine"],
-                           self.gen, jitter, extra_points=extra_points, t=t, image=view)
+                           self.gen, jitter, extra_points=extra_points, t=t, image=view, prune_weight=prune_weight,
+                           coarse_sdf=coarse_sdf)
 
     def _set_levels(self) -> None:
         """Coarse-to-fine grid (``grid_levels_initial`` < ``grid_levels``): start with that many levels and
@@ -203,8 +207,11 @@ class MonoSDFTrainer:
         R = len(pixels)
         r = self.rays
         origins, dirs = r.origins[slot], r.dirs[slot, pixels]
-        t = hierarchical_samples(self.sdf, self.density, origins, dirs, r.far[slot, pixels], cfg["near"], cfg["n_coarse"], cfg["n_fine"],
-                                 self.gen, True)
+        prune = float(cfg.get("prune_weight", 0.0) or 0.0)
+        if prune > 0 and self._prunable_frac > PRUNE_WORTH:
+            prune = 0.0  # the last step's weights: too few samples to prune to pay for the no-gradient pass
+        t, coarse_sdf = hierarchical_samples(self.sdf, self.density, origins, dirs, r.far[slot, pixels], cfg["near"], cfg["n_coarse"],
+                                             cfg["n_fine"], self.gen, True, with_coarse_sdf=True)
         # eikonal points (MonoSDF): R uniform points in the bounding cube + one sample of each ray
         # (``eikonal_ray_sample``: "random" = MonoSDF, "max_weight" = the highest-weight sample; the ray
         # sample's gradient comes from the rendering itself); with ``smooth_weight`` > 0 also a neighbour of
@@ -218,6 +225,10 @@ class MonoSDFTrainer:
         smooth_w = float(cfg.get("smooth_weight", 0.0))
         pick = torch.randint(0, t.shape[1], (R,), generator=self.gen) if mode == "random" else None
         extra = [uni]
+        # a pruned rendering has no gradient at most samples: the random ray sample then rides with the extras
+        surf_in_extra = pick is not None and prune > 0
+        if surf_in_extra:
+            extra.append(origins + dirs * t[rows, pick][:, None])
         if smooth_w > 0:
             jit = float(cfg.get("smooth_jitter", 0.01))
             extra.append(uni + (torch.rand(R, 3, generator=self.gen) - 0.5) * jit)
@@ -225,17 +236,21 @@ class MonoSDFTrainer:
                 surf = origins + dirs * t[rows, pick][:, None]
                 extra.append(surf + (torch.rand(R, 3, generator=self.gen) - 0.5) * jit)
         single = len(views) == 1
-        out = self.render_pixels(views[0] if single else slot, pixels, extra_points=torch.cat(extra), t=t)
+        out = self.render_pixels(views[0] if single else slot, pixels, extra_points=torch.cat(extra), t=t, prune_weight=prune,
+                                 coarse_sdf=coarse_sdf)
         terms: dict[str, tuple[float, torch.Tensor]] = {"color": (float(cfg["color_weight"]), color_loss(out.rgb, self.rgb[slot, pixels]))}
         g_extra = out.extra_grad
         assert g_extra is not None
         g_uni = g_extra[:R]
-        if pick is None:
-            pick = out.weights.detach().argmax(-1)
-        g_surf = out.grad[rows, pick]
+        if surf_in_extra:
+            g_surf, g_extra = g_extra[R : 2 * R], torch.cat([g_extra[:R], g_extra[2 * R :]])
+        else:
+            if pick is None:
+                pick = out.weights.detach().argmax(-1)  # always rendered with gradients, also when pruned
+            g_surf = out.grad[rows, pick]
         terms["eikonal"] = (float(cfg["eikonal_weight"]), eikonal_loss(torch.cat([g_uni, g_surf])))
         if smooth_w > 0:
-            own = torch.cat([g_uni, g_surf]) if len(extra) == 3 else g_uni
+            own = torch.cat([g_uni, g_surf]) if mode == "random" else g_uni  # random: the ray sample has a neighbour too
             terms["smooth"] = (smooth_w, smoothness_loss(own, g_extra[R:]))
 
         per_image: dict[str, list[tuple[float, torch.Tensor]]] = {}
@@ -257,7 +272,10 @@ class MonoSDFTrainer:
         logs = {k: float(v.detach()) for k, (_, v) in terms.items()}
         logs["loss"] = float(loss.detach())
         logs["beta"] = float(self.density.beta().detach())
-        stats = {"samples_weighted": float((out.weights.detach() > WEIGHTED_SAMPLE).sum(-1).float().mean())}
+        if float(cfg.get("prune_weight", 0.0) or 0.0) > 0:
+            self._prunable_frac = float((out.weights.detach() > float(cfg["prune_weight"])).float().mean())
+        stats = {"samples_weighted": float((out.weights.detach() > WEIGHTED_SAMPLE).sum(-1).float().mean()),
+                 "samples_rendered": out.kept / R}  # per ray, with gradients (n_coarse + n_fine unless pruned)
         for k, v in {**logs, **stats}.items():
             self._log_sums[k] = self._log_sums.get(k, 0.0) + v
         self._log_count += 1

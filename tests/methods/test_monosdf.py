@@ -91,6 +91,32 @@ def test_explicit_sdf_gradient_matches_autograd(fast, pe, levels):
     torch.testing.assert_close(grad, sdf_gradient_autograd(net, x), atol=1e-3, rtol=1e-3)
 
 
+@pytest.mark.parametrize("fast,pe", [(True, 6), (False, 3), (True, 0)])
+def test_explicit_sdf_gradient_backpropagates_like_double_backward(fast, pe):
+    """The eikonal / normal losses backpropagate through the explicit gradient: its parameter gradients
+    must equal autograd's double backward through the slow twin (grid table and every MLP weight)."""
+    net = SDFNetwork(_spec(), hidden=32, layers=2, geo_features=4, radius=1.0, fast_grid=fast, seed=0, pe_frequencies=pe)
+    with torch.no_grad():
+        net.grid.table.normal_(0, 0.3)
+        for lin in net.linears:
+            lin.weight.normal_(0, 0.3)
+    x = (torch.rand(300, 3) * 2 - 1) * 0.7
+    target = torch.nn.functional.normalize(torch.randn(300, 3), dim=-1)
+
+    def loss_of(grad: torch.Tensor) -> torch.Tensor:
+        return ((grad.norm(dim=-1) - 1) ** 2).mean() + (grad * target).sum(-1).mean()
+
+    params = [net.grid.table] + [p for lin in net.linears for p in lin.parameters()]
+    explicit = torch.autograd.grad(loss_of(net(x)[2]), params, allow_unused=True)
+    twin = sdf_gradient_autograd(net, x, create_graph=True)  # autograd's double backward through the slow path
+    reference = torch.autograd.grad(loss_of(twin), params, allow_unused=True)
+    for got, want in zip(explicit, reference):
+        if want is None:
+            assert got is None or float(got.abs().max()) == 0.0
+            continue
+        torch.testing.assert_close(got, want, atol=1e-3, rtol=1e-3)  # the C++ kernels are float32 -ffast-math
+
+
 @pytest.mark.parametrize("pe", [0, 6])
 def test_geometric_init_is_a_sphere_and_clamp_holds(pe):
     net = SDFNetwork(_spec(), hidden=64, layers=2, geo_features=4, radius=1.0, init_radius=0.6, inside_out=True, pe_frequencies=pe)
@@ -190,6 +216,54 @@ def test_rays_that_miss_everything_render_finite(tiny_scene):
         assert torch.isfinite(v).all()
     (out.rgb.sum() + out.depth.sum() + out.normal.sum()).backward()
     assert all(torch.isfinite(p.grad).all() for p in tr.sdf.parameters() if p.grad is not None)
+
+
+def test_pruned_rendering_matches_the_full_rendering(tiny_scene):
+    """``prune_weight`` (fast path) against rendering every sample with gradients (the slow twin): on a sharp
+    field (small beta) most samples are pruned, and colour, depth, normals and the parameter gradients
+    differ only by the weight left out (< prune_weight per sample)."""
+    tr = _trainer(tiny_scene)
+    with torch.no_grad():
+        tr.density.beta_param.fill_(0.01)
+    from methods.monosdf.render import hierarchical_samples
+
+    pixels = torch.arange(0, 400, 5)
+    r = tr.rays
+    t, coarse_sdf = hierarchical_samples(tr.sdf, tr.density, r.origins[0].expand(len(pixels), 3), r.dirs[0, pixels], r.far[0, pixels],
+                                         tr.cfg["near"], tr.cfg["n_coarse"], tr.cfg["n_fine"], None, False, with_coarse_sdf=True)
+    assert int(coarse_sdf.isnan().sum()) == len(pixels) * tr.cfg["n_fine"]
+    results = []
+    for prune in (0.0, 1e-4):
+        for p in list(tr.sdf.parameters()) + list(tr.color.parameters()):
+            p.grad = None
+        out = tr.render_pixels(0, pixels, jitter=False, t=t, prune_weight=prune)
+        (out.rgb.sum() + out.depth.sum() + out.normal.sum()).backward()
+        results.append((out, [p.grad.clone() for p in tr.sdf.linears.parameters()]))
+    (full, g_full), (pruned, g_pruned) = results
+    hinted = tr.render_pixels(0, pixels, jitter=False, t=t, prune_weight=1e-4, coarse_sdf=coarse_sdf)  # coarse SDF reused
+    assert hinted.kept == pruned.kept
+    torch.testing.assert_close(hinted.rgb, pruned.rgb, atol=1e-6, rtol=1e-6)
+    S = t.shape[1]
+    assert full.kept == len(pixels) * S and pruned.kept < 0.7 * len(pixels) * S
+    bound = S * 1e-4  # at most S samples, each with weight < prune_weight
+    torch.testing.assert_close(pruned.rgb, full.rgb, atol=bound, rtol=0)
+    torch.testing.assert_close(pruned.weights, full.weights, atol=1e-6, rtol=1e-5)  # transmittance unchanged
+    torch.testing.assert_close(pruned.depth, full.depth, atol=1e-5, rtol=1e-5)
+    torch.testing.assert_close(pruned.normal, full.normal, atol=bound, rtol=0)
+    for a, b in zip(g_pruned, g_full):
+        assert torch.isfinite(a).all()
+        torch.testing.assert_close(a, b, atol=2e-2 * float(b.abs().max()) + 1e-6, rtol=0)
+
+
+def test_pruned_training_steps_are_finite(tiny_scene):
+    for mode in ("random", "max_weight"):
+        tr = _trainer(tiny_scene, prune_weight=1e-4, eikonal_ray_sample=mode)
+        with torch.no_grad():
+            tr.density.beta_param.fill_(0.005)
+        for view in (0, 1):
+            logs = tr.step(view)
+            assert all(np.isfinite(v) for v in logs.values()), (mode, logs)
+        assert all(torch.isfinite(p).all() for p in tr.sdf.parameters())
 
 
 def test_training_steps_are_finite_with_all_zero_and_constant_priors(tiny_scene):
