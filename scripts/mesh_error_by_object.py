@@ -4,7 +4,8 @@ For every view of a dataset (or every ``--stride``-th), ray-cast the mesh (world
 camera, compare with the GT z-depth pixel by pixel, and group the pixels by their GT instance: per
 object the pixel count, the median |error| (m), the fraction of pixels off by more than 5 cm and by more
 than 30 cm, and the fraction where the mesh is in front of GT (a surface where there is none) vs behind
-(a surface missing). Also an image of the error maps of a few views (``--png``).
+(a surface missing), and the median ratio mesh depth / GT depth (< 1 on every large surface: a room
+shrunk towards the cameras). Also an image of the error maps of a few views (``--png``).
 
 Usage:
     .venv/bin/python scripts/mesh_error_by_object.py MESH.ply (RECIPE_NAME | DATASET_DIR) [--scale small]
@@ -55,7 +56,9 @@ def main() -> None:
         rows.append({"object": info.name if info else str(iid), "thin": bool(info and info.is_thin), "pixels": int(m.sum()),
                      "median_err_m": float(np.median(a)), "frac_gt_5cm": float((a > 0.05).mean()),
                      "frac_gt_30cm": float((a > 0.30).mean()), "frac_in_front": float((e < -0.05).mean()),
-                     "frac_behind_or_missing": float((e > 0.05).mean())})
+                     "frac_behind_or_missing": float((e > 0.05).mean()),
+                     # < 1 on every large surface: a room shrunk towards the cameras (the scale-and-shift ambiguity)
+                     "depth_ratio_median": float(np.median(depth[m & (depth > 0)] / gt[m & (depth > 0)])) if (m & (depth > 0)).any() else float("nan")})
     df = pd.DataFrame(rows).sort_values("pixels", ascending=False)
     a = np.abs(err[valid])
     print(f"{args.mesh} on {scene.name}: {len(views)} views, {valid.sum()} GT pixels; median |err| {np.median(a):.3f} m, "
