@@ -71,13 +71,14 @@ def main() -> None:
     for _ in range(args.warmup):
         trainer.step()
     clock = time.process_time if args.cpu_time else time.perf_counter
-    times, rendered = [], []
+    times = []
+    sum0, count0 = trainer._log_sums.get("samples_rendered", 0.0), trainer._log_count
     for _ in range(args.steps):
         t = clock()
         trainer.step()
         times.append(clock() - t)
-        rendered.append(trainer._log_sums["samples_rendered"] / trainer._log_count)
-    print(f"samples rendered with gradients per ray (mean since start): {statistics.mean(rendered):.1f} of {cfg['n_coarse'] + cfg['n_fine']}"
+    rendered = (trainer._log_sums["samples_rendered"] - sum0) / (trainer._log_count - count0)
+    print(f"samples rendered with gradients per ray (timed steps): {rendered:.1f} of {cfg['n_coarse'] + cfg['n_fine']}"
           f" ({'cpu' if args.cpu_time else 'wall'} time below)")
     med, best = statistics.median(times), min(times)
     print(f"grid: {'reference (PyTorch)' if args.reference_grid else 'C++ kernel'}, threads {args.threads}, "

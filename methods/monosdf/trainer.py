@@ -89,6 +89,7 @@ class MonoSDFTrainer:
         if fit not in ("ssi", "metric"):
             raise ValueError(f"depth_fit must be 'ssi' (MonoSDF) or 'metric' (diagnostic), got {fit!r}")
         self.depth_fixed_scale = self.rays.scale if fit == "metric" else None  # metric: the scene's metres per unit
+        self.prune_weight = float(cfg.get("prune_weight", 0.0) or 0.0)  # 0 = every sample with gradients (MonoSDF)
         self.pixel_sampler: PixelSampler = lambda v, n, g: torch.randint(0, HW, (n,), generator=g)  # noqa: E731
         self.extra_losses: list[Callable[..., dict[str, tuple[float, torch.Tensor]]]] = []
 
@@ -207,11 +208,11 @@ class MonoSDFTrainer:
         R = len(pixels)
         r = self.rays
         origins, dirs = r.origins[slot], r.dirs[slot, pixels]
-        prune = float(cfg.get("prune_weight", 0.0) or 0.0)
-        if prune > 0 and self._prunable_frac > PRUNE_WORTH:
-            prune = 0.0  # the last step's weights: too few samples to prune to pay for the no-gradient pass
-        t, coarse_sdf = hierarchical_samples(self.sdf, self.density, origins, dirs, r.far[slot, pixels], cfg["near"], cfg["n_coarse"],
-                                             cfg["n_fine"], self.gen, True, with_coarse_sdf=True)
+        # prune only while the last step left enough weightless samples to pay for the no-gradient pass
+        prune = self.prune_weight if self._prunable_frac <= PRUNE_WORTH else 0.0
+        sampled = hierarchical_samples(self.sdf, self.density, origins, dirs, r.far[slot, pixels], cfg["near"], cfg["n_coarse"],
+                                       cfg["n_fine"], self.gen, True, with_coarse_sdf=prune > 0)
+        t, coarse_sdf = sampled if prune > 0 else (sampled, None)  # coarse_sdf: the sampler's SDF, reused by the pruning pass
         # eikonal points (MonoSDF): R uniform points in the bounding cube + one sample of each ray
         # (``eikonal_ray_sample``: "random" = MonoSDF, "max_weight" = the highest-weight sample; the ray
         # sample's gradient comes from the rendering itself); with ``smooth_weight`` > 0 also a neighbour of
@@ -225,15 +226,15 @@ class MonoSDFTrainer:
         smooth_w = float(cfg.get("smooth_weight", 0.0))
         pick = torch.randint(0, t.shape[1], (R,), generator=self.gen) if mode == "random" else None
         extra = [uni]
+        surf = None if pick is None else origins + dirs * t[rows, pick][:, None]  # the random ray sample (R, 3)
         # a pruned rendering has no gradient at most samples: the random ray sample then rides with the extras
-        surf_in_extra = pick is not None and prune > 0
+        surf_in_extra = surf is not None and prune > 0
         if surf_in_extra:
-            extra.append(origins + dirs * t[rows, pick][:, None])
+            extra.append(surf)
         if smooth_w > 0:
             jit = float(cfg.get("smooth_jitter", 0.01))
             extra.append(uni + (torch.rand(R, 3, generator=self.gen) - 0.5) * jit)
-            if pick is not None:
-                surf = origins + dirs * t[rows, pick][:, None]
+            if surf is not None:
                 extra.append(surf + (torch.rand(R, 3, generator=self.gen) - 0.5) * jit)
         single = len(views) == 1
         out = self.render_pixels(views[0] if single else slot, pixels, extra_points=torch.cat(extra), t=t, prune_weight=prune,
@@ -272,8 +273,8 @@ class MonoSDFTrainer:
         logs = {k: float(v.detach()) for k, (_, v) in terms.items()}
         logs["loss"] = float(loss.detach())
         logs["beta"] = float(self.density.beta().detach())
-        if float(cfg.get("prune_weight", 0.0) or 0.0) > 0:
-            self._prunable_frac = float((out.weights.detach() > float(cfg["prune_weight"])).float().mean())
+        if self.prune_weight > 0:
+            self._prunable_frac = float((out.weights.detach() > self.prune_weight).float().mean())
         stats = {"samples_weighted": float((out.weights.detach() > WEIGHTED_SAMPLE).sum(-1).float().mean()),
                  "samples_rendered": out.kept / R}  # per ray, with gradients (n_coarse + n_fine unless pruned)
         for k, v in {**logs, **stats}.items():
