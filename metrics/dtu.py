@@ -38,7 +38,7 @@ import numpy as np
 
 from metrics._checks import as_cameras, as_points, check_positive
 from metrics.culling import points_visible, render_depth_maps
-from metrics.mesh import clean_mesh
+from metrics.mesh import EmptyReconstructionError, check_pred_mesh, clean_mesh
 from metrics.nn import nearest_neighbor
 
 DTU_REFERENCE_SIZE_MM = 350.0
@@ -205,6 +205,7 @@ def dtu_chamfer(
         ground_plane: optional (4,) plane P; GT points with ``P . [x, 1] > 0`` enter s2d.
         seed: shuffle seed of the radius downsampling.
     """
+    check_pred_mesh(pred_mesh)
     g = as_points(gt_points, "gt_points")
     Km, c2w, h, w = as_cameras(K, cam_to_world, H, W)
     if not isinstance(params, DTUParams):
@@ -226,12 +227,12 @@ def dtu_chamfer(
     inbound = np.all((data >= bb[0] - params.patch) & (data < bb[1] + 2 * params.patch), axis=1)
     data_in = data[inbound]
     if data_in.shape[0] == 0:
-        raise ValueError("no predicted point inside the evaluation bounding box")
+        raise EmptyReconstructionError("no predicted point inside the evaluation bounding box")
     in_box = np.all((data_in >= bb[0]) & (data_in <= bb[1]), axis=1)
     obs = in_box & observation_mask(data_in, Km, c2w, h, w, gt_depth_maps, params.max_dist)
     data_obs = data_in[obs]
     if data_obs.shape[0] == 0:
-        raise ValueError("no predicted point inside the observation mask")
+        raise EmptyReconstructionError("no predicted point inside the observation mask")
     d2s, _ = nearest_neighbor(data_obs, g)
     stl = g if plane is None else g[g @ plane[:3] + plane[3] > 0]
     if stl.shape[0] == 0:

@@ -148,6 +148,22 @@ def point_metrics(
     )
 
 
+class EmptyReconstructionError(ValueError):
+    """The predicted geometry leaves the protocol nothing to measure: an empty mesh, or no predicted point
+    where the protocol evaluates (e.g. a 3-view DTU run whose few triangles lie outside the object's box).
+
+    A result of the method (the surface was lost), not bad input: a table marks such a job failed with this
+    type, and a test can tell it from a harness error by the type alone."""
+
+
+def check_pred_mesh(mesh: Any, name: str = "pred_mesh") -> tuple[np.ndarray, np.ndarray]:
+    """:func:`clean_mesh` for a predicted mesh: an empty one raises :class:`EmptyReconstructionError`."""
+    v, f = getattr(mesh, "vertices", None), getattr(mesh, "faces", None)
+    if v is not None and f is not None and (len(v) == 0 or len(f) == 0):
+        raise EmptyReconstructionError(f"{name} is empty ({len(v)} vertices, {len(f)} faces)")
+    return clean_mesh(mesh, name)
+
+
 def clean_mesh(mesh: Any, name: str = "mesh") -> tuple[np.ndarray, np.ndarray]:
     """Validated vertices and the faces usable for sampling.
 

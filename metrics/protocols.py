@@ -44,7 +44,7 @@ from metrics.culling import (
     tsdf_refuse,
     voxel_downsample,
 )
-from metrics.mesh import MeshMetrics, clean_mesh, point_metrics, sample_mesh_surface
+from metrics.mesh import MeshMetrics, check_pred_mesh, clean_mesh, point_metrics, sample_mesh_surface
 from metrics.nn import Backend, NearestNeighborIndex
 
 
@@ -177,7 +177,7 @@ def evaluate_mesh_replica(
         nothing left after culling or cropping is a result, not an error: :func:`nothing_visible_metrics`.
     """
     Km, c2w, h, w = as_cameras(K, cam_to_world, H, W)
-    clean_mesh(pred_mesh, "pred_mesh")
+    check_pred_mesh(pred_mesh)
     check_positive(threshold, "threshold")
     if prepared_gt is None:
         surface = cull_replica_gt(gt_mesh, Km, c2w, h, w, bbox_scale=bbox_scale, gt_visibility=gt_visibility,
@@ -235,7 +235,7 @@ def evaluate_mesh_scannet(
         ``n_gt`` are the downsampled vertex counts.
     """
     Km, c2w, h, w = as_cameras(K, cam_to_world, H, W)
-    clean_mesh(pred_mesh, "pred_mesh")
+    check_pred_mesh(pred_mesh)
     check_positive(threshold, "threshold")
     if gt_index is None:
         gv = scannet_gt_points(gt_mesh, Km, c2w, h, w, downsample_voxel, tsdf_voxel, tsdf_trunc, depth_trunc, tsdf_block, refuse_gt)

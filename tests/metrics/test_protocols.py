@@ -15,6 +15,7 @@ from metrics.culling import (
     voxel_downsample,
 )
 from metrics.dtu import DTUParams, dtu_chamfer, dtu_gt_points, radius_downsample, sample_mesh_dtu
+from metrics.mesh import EmptyReconstructionError
 from metrics.protocols import cull_replica_gt, evaluate_mesh_replica, evaluate_mesh_scannet, sample_replica_gt
 
 
@@ -159,6 +160,26 @@ def test_dtu_sampling_downsampling_and_chamfer(ring_cameras):
         dtu_chamfer(big, gpts, K, c2w, H, W, params)  # no depth maps and no gt mesh
     with pytest.raises(ValueError, match="max_points"):
         sample_mesh_dtu(gt, 1e-5, max_points=1000)
+
+
+def test_lost_dtu_reconstruction_is_one_error_type(ring_cameras):
+    """An empty mesh and a mesh nowhere near the object are the same outcome (the surface was lost):
+    one exception type, a ValueError subclass, that the tables and tests tell from bad input."""
+    K, c2w, H, W = ring_cameras
+    params = DTUParams.scaled(object_size=0.6, image_downscale=20)
+    gt = trimesh.creation.icosphere(3, radius=0.3)
+    gpts = dtu_gt_points(gt, K, c2w, H, W, params)
+    far = trimesh.creation.icosphere(2, radius=0.05)
+    far.apply_translation([3.0, 0, 0])  # a few stray triangles outside the evaluation box
+    empty = trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64), process=False)
+    for mesh, msg in ((far, "evaluation bounding box"), (empty, "pred_mesh is empty")):
+        with pytest.raises(EmptyReconstructionError, match=msg):
+            dtu_chamfer(mesh, gpts, K, c2w, H, W, params, gt_mesh=gt)
+    with pytest.raises(EmptyReconstructionError):
+        evaluate_mesh_scannet(empty, gt, K, c2w, H, W)
+    with pytest.raises(ValueError) as info:  # a bad GT is bad input, not a lost reconstruction
+        dtu_chamfer(far, np.zeros((0, 3)), K, c2w, H, W, params, gt_mesh=gt)
+    assert not isinstance(info.value, EmptyReconstructionError)
 
 
 def test_real_lamp_thin_structures(real_mesh, ring_cameras):
