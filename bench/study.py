@@ -46,7 +46,7 @@ class StudyRun:
     exact_priors: bool
     sweep_value: Any = None
     sweep_key: str | None = None
-    mesh_dir: str | None = None  # the final snapshot's mesh is written here (world metres, PLY)
+    mesh_dir: str | None = None  # every snapshot's mesh is written here (world metres, PLY; _write_meshes)
 
     @property
     def mesh_name(self) -> str:
@@ -124,6 +124,7 @@ def run_one(run: StudyRun, snapshots: int, stop_at: float = 1.0) -> list[dict[st
     t0 = time.perf_counter()
     artifacts = get_method(run.method).fit(scene, cfg, run.seed, _progress_printer(run, t0))
     fit_s = time.perf_counter() - t0
+    _write_meshes(run, artifacts.snapshots)  # before evaluating: a failed evaluation keeps the trained meshes
     records = []
     for snap in artifacts.snapshots:
         rec: dict[str, Any] = {"value": json.dumps(run.sweep_value), "seed": run.seed, "fraction": snap.fraction,
@@ -134,12 +135,24 @@ def run_one(run: StudyRun, snapshots: int, stop_at: float = 1.0) -> list[dict[st
             rec["error"] = str(exc)
         rec.update({k: v for k, v in snap.diagnostics.items() if isinstance(v, (int, float))})
         records.append(rec)
-    last = artifacts.snapshots[-1].mesh if artifacts.snapshots else None
-    if run.mesh_dir and last is not None and len(last.faces):
-        path = Path(run.mesh_dir) / run.mesh_name
-        path.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write_bytes(path, last.export(file_type="ply", encoding="binary"))
+        score = f"F {rec['fscore']:.3f}" if "fscore" in rec else (f"CD {rec['cd']:.4f}" if "cd" in rec else rec.get("error", "-"))
+        print(f"[study] seed {run.seed}: snapshot at {snap.iterations} iterations: {score}", file=sys.stderr, flush=True)
     return records
+
+
+def _write_meshes(run: StudyRun, snapshots: list[Any]) -> None:
+    """Every snapshot's mesh (world metres, binary PLY) into ``run.mesh_dir``: the final one as
+    :attr:`StudyRun.mesh_name`, the others with ``_it<iterations>`` before the suffix; empty meshes skipped."""
+    if not run.mesh_dir:
+        return
+    for i, snap in enumerate(snapshots):
+        mesh = snap.mesh
+        if mesh is None or not len(mesh.faces):
+            continue
+        name = run.mesh_name if i == len(snapshots) - 1 else run.mesh_name.replace(".ply", f"_it{snap.iterations}.ply")
+        path = Path(run.mesh_dir) / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_bytes(path, mesh.export(file_type="ply", encoding="binary"))
 
 
 def _progress_printer(run: StudyRun, t0: float, every: float = 0.1) -> Callable[[float, str], None]:

@@ -11,7 +11,7 @@ Usage:
     .venv/bin/python scripts/mesh_error_by_object.py MESH.ply (RECIPE_NAME | DATASET_DIR) [--scale small]
         [--stride 4] [--png errors.png]
 
-A study writes the final mesh of every run to ``<out>/meshes/`` (``bench study convergence``).
+A study writes every snapshot mesh of every run to ``<out>/meshes/`` (``bench study convergence``).
 """
 
 from __future__ import annotations
