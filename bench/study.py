@@ -135,8 +135,6 @@ def run_one(run: StudyRun, snapshots: int, stop_at: float = 1.0) -> list[dict[st
             rec["error"] = str(exc)
         rec.update({k: v for k, v in snap.diagnostics.items() if isinstance(v, (int, float))})
         records.append(rec)
-        score = f"F {rec['fscore']:.3f}" if "fscore" in rec else (f"CD {rec['cd']:.4f}" if "cd" in rec else rec.get("error", "-"))
-        print(f"[study] seed {run.seed}: snapshot at {snap.iterations} iterations: {score}", file=sys.stderr, flush=True)
     return records
 
 

@@ -25,7 +25,7 @@ def test_parse_sweep():
     assert parse_sweep(None) == (None, [None])
 
 
-def test_study_cli_writes_curves_with_diagnostics(tmp_path, capfd):
+def test_study_cli_writes_curves_with_diagnostics(tmp_path):
     out = tmp_path / "study"
     rc = main(["study", "convergence", "monosdf", "scannet_like_tiny", "--scale", "tiny", "--seeds", "0", "--snapshots", "2",
                "--exact-priors", "--workers", "1", "--set", "iterations=8", "rays_per_batch=64", "mesh_resolution=32",
@@ -41,8 +41,7 @@ def test_study_cli_writes_curves_with_diagnostics(tmp_path, capfd):
     meshes = sorted(p.name for p in (out / "meshes").glob("*.ply"))  # every snapshot's mesh of every run, to look at
     assert meshes == ["appearance_dim=0_seed0.ply", "appearance_dim=0_seed0_it4.ply",
                       "appearance_dim=8_seed0.ply", "appearance_dim=8_seed0_it4.ply"]
-    err = capfd.readouterr().err  # each snapshot's score in the log as it is evaluated
-    assert err.count("seed 0: snapshot at 4 iterations: F ") == 2 and err.count("seed 0: snapshot at 8 iterations: F ") == 2
+
 
 
 def test_study_bad_key_is_one_clear_error(tmp_path, capsys):
