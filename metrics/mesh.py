@@ -158,13 +158,10 @@ class EmptyReconstructionError(ValueError):
 
 def check_pred_mesh(mesh: Any, name: str = "pred_mesh") -> tuple[np.ndarray, np.ndarray]:
     """:func:`clean_mesh` for a predicted mesh: an empty one raises :class:`EmptyReconstructionError`."""
-    v, f = getattr(mesh, "vertices", None), getattr(mesh, "faces", None)
-    if v is not None and f is not None and (len(v) == 0 or len(f) == 0):
-        raise EmptyReconstructionError(f"{name} is empty ({len(v)} vertices, {len(f)} faces)")
-    return clean_mesh(mesh, name)
+    return clean_mesh(mesh, name, empty_error=EmptyReconstructionError)
 
 
-def clean_mesh(mesh: Any, name: str = "mesh") -> tuple[np.ndarray, np.ndarray]:
+def clean_mesh(mesh: Any, name: str = "mesh", empty_error: type[ValueError] = ValueError) -> tuple[np.ndarray, np.ndarray]:
     """Validated vertices and the faces usable for sampling.
 
     Behaviour on degenerate input (documented, deliberate):
@@ -178,13 +175,15 @@ def clean_mesh(mesh: Any, name: str = "mesh") -> tuple[np.ndarray, np.ndarray]:
     Args:
         mesh: ``trimesh.Trimesh`` in world metres.
         name: argument name used in error messages.
+        empty_error: the ValueError type raised for a mesh without vertices or faces
+            (:func:`check_pred_mesh`: :class:`EmptyReconstructionError`).
 
     Returns:
         vertices (V, 3) float64 (may still hold NaN rows, none referenced), faces (F, 3) int64.
 
     Raises:
-        TypeError: not a trimesh.Trimesh. ValueError: no faces, face index out of range, or no face
-        with positive finite area left.
+        TypeError: not a trimesh.Trimesh. ValueError: no faces (as ``empty_error``), face index out of
+        range, or no face with positive finite area left.
     """
     import trimesh
 
@@ -193,7 +192,7 @@ def clean_mesh(mesh: Any, name: str = "mesh") -> tuple[np.ndarray, np.ndarray]:
     v = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
     f = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
     if f.shape[0] == 0 or v.shape[0] == 0:
-        raise ValueError(f"{name} is empty ({v.shape[0]} vertices, {f.shape[0]} faces)")
+        raise empty_error(f"{name} is empty ({v.shape[0]} vertices, {f.shape[0]} faces)")
     if f.min() < 0 or f.max() >= v.shape[0]:
         raise ValueError(f"{name} has face indices outside [0, {v.shape[0]})")
     finite_v = np.isfinite(v).all(1)

@@ -21,12 +21,12 @@ import numpy as np
 
 
 def project(points: np.ndarray, K: np.ndarray, cam_to_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pixel coordinates (P, 2) and z-depth (P,) of world points (P, 3) in an OpenCV camera."""
-    w2c = np.linalg.inv(cam_to_world)
-    q = points @ w2c[:3, :3].T + w2c[:3, 3]
-    z = q[:, 2]
-    uv = q[:, :2] / np.where(np.abs(z) > 1e-9, z, 1e-9)[:, None]
-    return uv * np.array([K[0, 0], K[1, 1]]) + K[:2, 2], z
+    """Pixel coordinates (P, 2) and z-depth (P,) of world points (P, 3) in one OpenCV camera: the metrics
+    library's projection (metrics.culling, the one its frustum and visibility tests use), one chunk."""
+    from metrics.culling import _project
+
+    _, u, v, z = next(_project(points, K[None], cam_to_world[None], chunk=max(len(points), 1)))
+    return np.stack([u[0], v[0]], axis=-1), z[0]
 
 
 def main() -> None:

@@ -43,7 +43,6 @@ def test_study_cli_writes_curves_with_diagnostics(tmp_path):
                       "appearance_dim=8_seed0.ply", "appearance_dim=8_seed0_it4.ply"]
 
 
-
 def test_study_bad_key_is_one_clear_error(tmp_path, capsys):
     rc = main(["study", "convergence", "monosdf", "scannet_like_tiny", "--scale", "tiny", "--seeds", "0",
                "--sweep", "no_such_key=1,2", "--out", str(tmp_path / "x")])
