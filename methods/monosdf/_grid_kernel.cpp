@@ -295,6 +295,11 @@ torch::Tensor softplus_slope_backward(torch::Tensor grad_a, torch::Tensor grad_s
     return out;
 }
 
+// Positional encoding and its gradient chain (_encoding_kernel.cpp, compiled into the same extension).
+torch::Tensor pe_encode(torch::Tensor u, torch::Tensor freqs);
+torch::Tensor pe_chain_forward(torch::Tensor gin, torch::Tensor pe, torch::Tensor freqs);
+torch::Tensor pe_chain_backward(torch::Tensor dout, torch::Tensor pe, torch::Tensor freqs);
+
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
     m.def("softplus_slope_forward", &softplus_slope_forward, "softplus(beta) and sigmoid(beta z)");
     m.def("softplus_slope_backward", &softplus_slope_backward, "fused backward of softplus_slope");
@@ -302,4 +307,7 @@ PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
     m.def("backward", &grid_backward, "grid table gradient");
     m.def("jacobian_contract_forward", &jacobian_contract_forward, "sum_j J[p, d, j] g[p, j]");
     m.def("jacobian_contract_backward", &jacobian_contract_backward, "gradients of jacobian_contract_forward");
+    m.def("pe_encode", &pe_encode, "positional encoding [u, sin(f u), cos(f u)]");
+    m.def("pe_chain_forward", &pe_chain_forward, "d sdf / d u through the positional encoding");
+    m.def("pe_chain_backward", &pe_chain_backward, "backward of pe_chain_forward w.r.t. its gradient input");
 }

@@ -60,6 +60,48 @@ def _softplus_and_slope(z: torch.Tensor, fast: bool) -> tuple[torch.Tensor, torc
     return softplus_and_slope_reference(z)
 
 
+class _PEChain(torch.autograd.Function):
+    """C++ chain rule of the positional encoding (``_encoding_kernel.cpp``): forward and its backward with
+    respect to the gradient input."""
+
+    @staticmethod
+    def forward(ctx, gin_pe: torch.Tensor, pe: torch.Tensor, freqs: torch.Tensor):  # type: ignore[override]
+        ctx.save_for_backward(pe, freqs)
+        return _load_extension().pe_chain_forward(gin_pe.contiguous(), pe, freqs)
+
+    @staticmethod
+    def backward(ctx, grad_out: torch.Tensor):  # type: ignore[override]
+        pe, freqs = ctx.saved_tensors
+        return _load_extension().pe_chain_backward(grad_out.contiguous(), pe, freqs), None, None
+
+
+def linear_blocks(blocks: list[torch.Tensor], weight: torch.Tensor, bias: torch.Tensor) -> torch.Tensor:
+    """``torch.cat(blocks, -1) @ weight.T + bias`` without the concatenation: one product per input block
+    with its columns of ``weight``, accumulated by ``addmm``.
+
+    Same parameters, same values up to float summation order; autograd then computes an input gradient
+    only for the blocks that need one (the positional encoding, the ray directions and the points do not:
+    at 55 inputs that one (P, H) @ (H, 55) product was the slowest matrix product of the step) and never
+    materialises or slices the (P, in) concatenation.
+
+    Args:
+        blocks: (P, d_i) tensors with ``sum(d_i) == weight.shape[1]`` (in the column order of ``weight``).
+        weight: (out, in), e.g. ``Linear.weight`` or a leading column slice of it. bias: (out,) or (P, out).
+
+    Returns:
+        (P, out).
+    """
+    out = bias
+    c = 0
+    for x in blocks:
+        d = x.shape[-1]
+        out = torch.addmm(out, x, weight[:, c : c + d].t())
+        c += d
+    if c != weight.shape[1]:
+        raise ValueError(f"linear_blocks: blocks give {c} inputs, the weight takes {weight.shape[1]}")
+    return out
+
+
 class SDFNetwork(torch.nn.Module):
     """SDF field with analytic spatial gradient.
 
@@ -95,30 +137,43 @@ class SDFNetwork(torch.nn.Module):
             return feat
         return feat * (torch.arange(feat.shape[-1]) < self.active_levels * self.grid.spec.features).to(feat.dtype)
 
-    def encode(self, u: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
-        """Positional encoding of ``u = x / R`` (P, 3) -> (PE (P, 3 + 6F) as ``[u, sin(f_k u), cos(f_k u)]``
-        with the k-major layout ``[sin k=0 xyz, ..., sin k=F-1 xyz, cos ...]``, f u (P, F, 3) and its sin / cos
-        for the gradient; None without frequencies)."""
-        if self.pe_frequencies == 0:
-            return u, None, None
-        fu = u[:, None, :] * self.pe_freqs[None, :, None]  # (P, F, 3)
-        sin, cos = torch.sin(fu), torch.cos(fu)
-        P = u.shape[0]
-        return torch.cat([u, sin.reshape(P, -1), cos.reshape(P, -1)], dim=-1), sin, cos
+    def encode(self, u: torch.Tensor) -> torch.Tensor:
+        """Positional encoding of ``u = x / R`` (P, 3) -> (P, 3 + 6F) ``[u, sin(f_k u), cos(f_k u)]`` with the
+        k-major layout ``[sin k=0 xyz, ..., sin k=F-1 xyz, cos ...]`` (``u`` alone without frequencies).
+        C++ kernel (``_encoding_kernel.cpp``) when the fast path is on; :meth:`encode_reference` is its twin."""
+        if self.pe_frequencies and self.grid.fast and u.dtype == torch.float32 and fast_available():
+            return _load_extension().pe_encode(u.contiguous(), self.pe_freqs)
+        return self.encode_reference(u)
 
-    def _pe_backward(self, g0: torch.Tensor, w_pe: torch.Tensor, sin: torch.Tensor | None, cos: torch.Tensor | None) -> torch.Tensor:
-        """d sdf / d u through the encoding (chain rule of :meth:`encode`): ``g0`` (P, H) is the gradient at
-        the first layer's pre-activation times its slope, ``w_pe`` (H, 3 + 6F) the first layer's weight
-        columns of the encoding. Each block (u, sin, cos) is its own small product ``g0 @ w_block``: slicing
-        one (P, 3 + 6F) product instead costs a zero-filled (P, 3 + 6F) buffer per slice in the backward."""
-        out = g0 @ w_pe[:, :3]
-        if sin is None or cos is None:
-            return out
+    def encode_reference(self, u: torch.Tensor) -> torch.Tensor:
+        """:meth:`encode` in PyTorch ops (the slow twin)."""
+        if self.pe_frequencies == 0:
+            return u
+        fu = u[:, None, :] * self.pe_freqs[None, :, None]  # (P, F, 3)
+        P = u.shape[0]
+        return torch.cat([u, torch.sin(fu).reshape(P, -1), torch.cos(fu).reshape(P, -1)], dim=-1)
+
+    def pe_chain(self, gin_pe: torch.Tensor, pe: torch.Tensor) -> torch.Tensor:
+        """d sdf / d u through the encoding (chain rule of :meth:`encode`): ``gin_pe`` (P, 3 + 6F) is the
+        gradient of the SDF output with respect to the encoding ``pe`` (P, 3 + 6F) -> (P, 3). Differentiable
+        with respect to ``gin_pe`` (the encoding depends on the points only, which need no gradient). C++
+        kernel when the fast path is on; :meth:`pe_chain_reference` is its twin."""
+        if self.pe_frequencies == 0:
+            return gin_pe
+        if self.grid.fast and gin_pe.dtype == torch.float32 and fast_available():
+            return _PEChain.apply(gin_pe, pe.detach(), self.pe_freqs)
+        return self.pe_chain_reference(gin_pe, pe)
+
+    def pe_chain_reference(self, gin_pe: torch.Tensor, pe: torch.Tensor) -> torch.Tensor:
+        """:meth:`pe_chain` in PyTorch ops (the slow twin): ``gin_u + sum_k f_k (gin_sin cos - gin_cos sin)``."""
+        if self.pe_frequencies == 0:
+            return gin_pe
         F_ = self.pe_frequencies
-        P = g0.shape[0]
-        g_sin = (g0 @ w_pe[:, 3 : 3 + 3 * F_]).reshape(P, F_, 3)
-        g_cos = (g0 @ w_pe[:, 3 + 3 * F_ :]).reshape(P, F_, 3)
-        return out + ((g_sin * cos - g_cos * sin) * self.pe_freqs[None, :, None]).sum(1)
+        P = gin_pe.shape[0]
+        sin, cos = pe[:, 3 : 3 + 3 * F_].reshape(P, F_, 3), pe[:, 3 + 3 * F_ :].reshape(P, F_, 3)
+        g_sin = gin_pe[:, 3 : 3 + 3 * F_].reshape(P, F_, 3)
+        g_cos = gin_pe[:, 3 + 3 * F_ :].reshape(P, F_, 3)
+        return gin_pe[:, :3] + ((g_sin * cos - g_cos * sin) * self.pe_freqs[None, :, None]).sum(1)
 
     def _geometric_init(self, n_grid: int, r: float, inside_out: bool) -> None:
         """IDR geometric init: a sphere SDF of radius r in normalised-by-R coordinates (grid features and
@@ -151,11 +206,12 @@ class SDFNetwork(torch.nn.Module):
         feat, jac = self.grid(xs, with_jacobian=with_gradient)
         feat = self.level_mask(feat)
         jac = None if jac is None else self.level_mask(jac)  # (P, 3, L * F): the same mask on the last axis
-        pe, sin, cos = self.encode(xs)
-        a = torch.cat([feat, pe], dim=-1)
+        pe = self.encode(xs)  # (P, 3 + 6 F_pe)
         slopes = []
-        for lin in self.linears[:-1]:
-            a, slope = _softplus_and_slope(lin(a), self.grid.fast)
+        a = feat
+        for i, lin in enumerate(self.linears[:-1]):
+            z = linear_blocks([feat, pe], lin.weight, lin.bias) if i == 0 else lin(a)  # first layer: no (P, in) concatenation
+            a, slope = _softplus_and_slope(z, self.grid.fast)
             slopes.append(slope)
         out = self.linears[-1](a)
         sdf_net = out[:, 0] * self.radius  # the MLP works in x / R units; the SDF in normalised units
@@ -163,14 +219,14 @@ class SDFNetwork(torch.nn.Module):
         grad = None
         if with_gradient:
             # explicit vector-Jacobian product of the SDF output (differentiable, first-order ops only)
-            # (the first layer's product is split by input block, grid / encoding: no slice of a (P, in) tensor)
             g = self.linears[-1].weight[0].expand_as(slopes[-1])
             for lin, slope in zip(reversed(self.linears[1:-1]), reversed(slopes[1:])):
                 g = (g * slope) @ lin.weight  # (P, in)
             g0 = g * slopes[0]  # (P, H): d sdf / d (first layer pre-activation)
             w0 = self.linears[0].weight  # (H, L * F + 3 + 6 F_pe)
             c = jac.shape[-1]
-            grad = jacobian_contract(jac, g0 @ w0[:, :c], self.grid.fast) + self._pe_backward(g0, w0[:, c:], sin, cos)  # (P, 3); 1/R and x R cancel
+            # one product per input block (grid / encoding), then each block's own chain rule
+            grad = jacobian_contract(jac, g0 @ w0[:, :c], self.grid.fast) + self.pe_chain(g0 @ w0[:, c:], pe)  # (P, 3); 1/R and x R cancel
         # bounding-sphere clamp (MonoSDF): every ray terminates inside the sphere
         norm = x.norm(dim=-1)
         sphere = self.radius - norm
@@ -192,7 +248,7 @@ def sdf_gradient_autograd(net: SDFNetwork, x: torch.Tensor, create_graph: bool =
     xs = x / net.radius
     feat, _ = interpolate_reference(net.grid.table, xs, net.grid.spec, with_jacobian=False)
     feat = net.level_mask(feat)
-    a = torch.cat([feat, net.encode(xs)[0]], dim=-1)
+    a = torch.cat([feat, net.encode_reference(xs)], dim=-1)
     for lin in net.linears[:-1]:
         a = F.softplus(lin(a), beta=SOFTPLUS_BETA)
     sdf = torch.minimum(net.linears[-1](a)[:, 0] * net.radius, net.radius - x.norm(dim=-1))
@@ -224,6 +280,26 @@ class ColorNetwork(torch.nn.Module):
                 image: int | torch.Tensor | None = None) -> torch.Tensor:
         """x, view_dirs, normals: (P, 3); geo: (P, G); image: training slot whose code is used, an int or
         (P,) per point (None = the mean code, for views without one) -> rgb (P, 3) in [0, 1]."""
+        first = self.mlp[0]
+        n_point = first.in_features - self.appearance_dim  # per-point inputs: x, view dir, normal, geo feature
+        bias = first.bias
+        if self.appearance_dim:
+            # the code is constant per image: its share of the first layer is a per-image bias
+            # (W_code @ code + b), computed once per image instead of a (P, appearance_dim) input block
+            w_code = first.weight[:, n_point:]
+            if isinstance(image, torch.Tensor):
+                bias = torch.addmm(first.bias, self.codes, w_code.t())[image]  # (P, hidden)
+            else:
+                code = self.codes.mean(0) if image is None else self.codes[int(image)]
+                bias = first.bias + w_code @ code  # (hidden,)
+        # one (P, 24) block: four small products (K = 3) would each pass over the (P, hidden) output (measured slower)
+        h = linear_blocks([torch.cat([x, view_dirs, normals, geo], dim=-1)], first.weight[:, :n_point], bias)
+        return torch.sigmoid(self.mlp[1:](h))
+
+    def forward_reference(self, x: torch.Tensor, view_dirs: torch.Tensor, normals: torch.Tensor, geo: torch.Tensor,
+                          image: int | torch.Tensor | None = None) -> torch.Tensor:
+        """Slow, obviously-correct twin of :meth:`forward`: the MLP on the concatenated input
+        ``[x, view dir, normal, geo feature, image code]`` (tests compare them)."""
         parts = [x, view_dirs, normals, geo]
         if self.appearance_dim:
             if isinstance(image, torch.Tensor):

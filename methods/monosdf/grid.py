@@ -186,10 +186,10 @@ def _load_extension():
             try:
                 from torch.utils.cpp_extension import _get_build_directory, load
 
-                src = Path(__file__).with_name("_grid_kernel.cpp")
+                src = [str(Path(__file__).with_name(name)) for name in ("_grid_kernel.cpp", "_encoding_kernel.cpp")]
                 verbose = os.environ.get("BENCH_VERBOSE_BUILD") == "1"
                 with build_lock(Path(_get_build_directory(EXT_NAME, verbose))):
-                    _EXT = load(name=EXT_NAME, sources=[str(src)], extra_cflags=["-O3", "-fopenmp", "-march=native", "-ffast-math"],
+                    _EXT = load(name=EXT_NAME, sources=src, extra_cflags=["-O3", "-fopenmp", "-march=native", "-ffast-math"],
                                 extra_ldflags=["-fopenmp"], verbose=verbose)
             except Exception as exc:  # no compiler / headers: use the reference path
                 import warnings

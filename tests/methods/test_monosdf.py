@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from bench.errors import BenchInputError
-from methods.monosdf.field import LaplaceDensity, SDFNetwork, sdf_gradient_autograd
+from methods.monosdf.field import ColorNetwork, LaplaceDensity, SDFNetwork, linear_blocks, sdf_gradient_autograd
 from methods.monosdf.grid import (
     FeatureGrid,
     fast_available,
@@ -115,6 +115,60 @@ def test_explicit_sdf_gradient_backpropagates_like_double_backward(fast, pe):
             assert got is None or float(got.abs().max()) == 0.0
             continue
         torch.testing.assert_close(got, want, atol=1e-3, rtol=1e-3)  # the C++ kernels are float32 -ffast-math
+
+
+@pytest.mark.skipif(not fast_available(), reason="no C++ compiler")
+def test_encoding_kernels_match_reference_values_and_gradient():
+    """The C++ positional encoding and its gradient chain against their PyTorch twins (values, and the
+    chain's gradient with respect to its gradient input, which the eikonal / normal losses use)."""
+    net = SDFNetwork(_spec(), hidden=32, layers=2, geo_features=4, radius=1.0, fast_grid=True, seed=0, pe_frequencies=6)
+    u = torch.cat([torch.rand(2000, 3) * 2 - 1, torch.tensor([[1.0, -1.0, 0.0], [0.0, 0.0, 0.0]])])
+    pe_fast, pe_ref = net.encode(u), net.encode_reference(u)
+    assert pe_fast.shape == (u.shape[0], 3 + 6 * 6)
+    torch.testing.assert_close(pe_fast, pe_ref, atol=2e-5, rtol=1e-5)  # sin / cos of arguments up to 32
+    gin = torch.randn(u.shape[0], 39, requires_grad=True)
+    w = torch.randn(u.shape[0], 3)
+    fast, ref = net.pe_chain(gin, pe_ref), net.pe_chain_reference(gin, pe_ref)
+    torch.testing.assert_close(fast, ref, atol=1e-4, rtol=1e-5)
+    g_fast = torch.autograd.grad((fast * w).sum(), gin)[0]
+    g_ref = torch.autograd.grad((ref * w).sum(), gin)[0]
+    torch.testing.assert_close(g_fast, g_ref, atol=1e-5, rtol=1e-5)
+
+
+def test_linear_blocks_equals_linear_of_the_concatenation():
+    lin = torch.nn.Linear(55, 32)
+    a = torch.randn(400, 16, requires_grad=True)
+    b = torch.randn(400, 39, requires_grad=True)
+    w = torch.randn(400, 32)
+    got = linear_blocks([a, b], lin.weight, lin.bias)
+    want = lin(torch.cat([a, b], -1))
+    torch.testing.assert_close(got, want, atol=1e-5, rtol=1e-5)
+    params = [a, b, lin.weight, lin.bias]
+    for x, y in zip(torch.autograd.grad((got * w).sum(), params), torch.autograd.grad((want * w).sum(), params)):
+        torch.testing.assert_close(x, y, atol=1e-4, rtol=1e-5)
+    with pytest.raises(ValueError, match="blocks give 16 inputs"):
+        linear_blocks([a], lin.weight, lin.bias)
+
+
+@pytest.mark.parametrize("image", [3, None, "per_point"])
+def test_colour_network_folds_the_image_code_like_the_concatenated_input(image):
+    """The image code enters the colour network's first layer as a per-image bias; the twin feeds the
+    concatenated ``[x, view, normal, geo, code]`` to the same MLP (values and every gradient)."""
+    torch.manual_seed(0)
+    net = ColorNetwork(geo_features=5, hidden=16, layers=1, appearance_dim=8, num_images=6)
+    with torch.no_grad():
+        net.codes.normal_(0, 0.5)
+    P = 300
+    x, v = torch.randn(P, 3), torch.randn(P, 3)
+    n = torch.randn(P, 3, requires_grad=True)
+    g = torch.randn(P, 5, requires_grad=True)
+    img = torch.randint(0, 6, (P,)) if image == "per_point" else image
+    w = torch.randn(P, 3)
+    got, want = net(x, v, n, g, img), net.forward_reference(x, v, n, g, img)
+    torch.testing.assert_close(got, want, atol=1e-6, rtol=1e-5)
+    params = [n, g] + list(net.parameters())
+    for a, b in zip(torch.autograd.grad((got * w).sum(), params), torch.autograd.grad((want * w).sum(), params)):
+        torch.testing.assert_close(a, b, atol=1e-5, rtol=1e-4)
 
 
 @pytest.mark.parametrize("pe", [0, 6])
