@@ -1,17 +1,39 @@
-"""Uncertainty-based instance mask constraint (paper Sec. 3.3; official ``model/network.py: cal_warp_views``).
+"""Uncertainty-based instance mask constraint (paper Sec. 3.3; official ``model/network.py: cal_warp_views``,
+``model/loss.py: get_warp_rgb_loss``).
 
 For a ray of instance k whose depth/normal weight is 0 (certainty below the cut-off, i.e. the prior is
 not trusted there), every ray sample is projected into ``n_source`` nearby views of the same instance,
 where colour and the instance mask are sampled bilinearly; samples outside the image or the source
-mask count zero, and the warped colour is ``sum_i w_i valid_i c_src_i``. A pixel counts if
-``sum_i w_i valid_i > 0.01`` and at least one sample lands in the mask. The loss is the L1 against the
-reference pixel colour, averaged per source view, then over instances (weight 0.4).
+mask count zero, and the warped colour is ``sum_i w_i valid_i c_src_i``. The loss is the L1 (mean over the
+three channels) against the reference pixel colour, weight 0.4.
+
+Where our port and the official code can differ, a config key chooses (default: the code; docs/uncertainty.md,
+"Mask constraint: official code vs ours"):
+
+* ``mask_hit_threshold``: a sample is in the source mask if the bilinear mask value exceeds it (code: 0, about
+  1 px of dilation; ours until session 10: 0.5).
+* ``mask_count_rule``: which rays count. ``code``: ``sum_i w_i inside_i > 0.01`` (projections inside the image
+  carry weight) and at least one sample in the mask; ``ours``: ``sum_i w_i valid_i > 0.01`` (weight inside
+  the mask) and at least one valid sample.
+* ``mask_normalisation``. ``code``: per source view, the sum over counted rays / (their count + 1e-6) (0
+  without any); the mean over the instance's sources, empty ones counting 0; the sum over instances divided
+  by the number of the view's valid instances (those with source views), also those with no untrusted ray
+  in the batch. ``ours``: means over the counted rays, the sources with any, and the instances with any
+  (1.5-3x stronger where most sources or instances are empty).
 
 Nearby views of an instance: the ray through the instance's bounding-box centre in each view; a
 source must see the instance with an angle to the reference ray in (``min_angle``, ``max_angle``)
 degrees and a ray-ray distance below ``max_ray_dist`` (normalised units); the closest ``n_source``
 by ray distance are kept. Instances must appear in >= ``min_views`` views with > ``min_area_frac`` x
 H x W pixels.
+
+Diagnostics (:meth:`MaskConstraint.diagnostics`, averaged per step since the last call, in every snapshot's
+diagnostics and so in every job result's curve and in the study): ``mask_untrusted_rays`` (untrusted instance
+rays in the batch), ``mask_rays`` (rays counted, summed over source views), ``mask_instances`` (instances with
+a counted ray) of ``mask_instances_valid``, ``mask_wvalid_mean`` (mean ``sum_i w_i valid_i`` of the counted
+rays: well below 1 means the weight is spread along the ray or lands outside the source mask) and
+``mask_color_gap`` (mean reference - warped colour of the counted rays: > 0 means the warped colour is darker,
+which the L1 answers by pushing weight onto the samples that land in the mask).
 """
 
 from __future__ import annotations
@@ -43,6 +65,14 @@ class MaskConstraint:
         self.weight = float(cfg["mask_weight"])
         self.untrusted = torch.from_numpy(untrusted.reshape(untrusted.shape[0], -1))
         self.cfg = cfg
+        self.hit_threshold = float(cfg.get("mask_hit_threshold", 0.0))
+        self.count_rule = str(cfg.get("mask_count_rule", "code"))
+        self.normalisation = str(cfg.get("mask_normalisation", "code"))
+        for key, val in (("mask_count_rule", self.count_rule), ("mask_normalisation", self.normalisation)):
+            if val not in ("code", "ours"):
+                raise ValueError(f"{key} must be 'code' (official release) or 'ours', got {val!r}")
+        self._sums: dict[str, float] = {}
+        self._steps = 0
         scene, views = trainer.scene, trainer.views
         V, H, W = instance_ids.shape
         self.H, self.W = H, W
@@ -84,22 +114,30 @@ class MaskConstraint:
                         cands.append((dist, j))
                 if cands:
                     self.sources[(v, k)] = [j for _, j in sorted(cands)[: int(cfg["mask_n_source"])]]
+        self.instances_of_view: dict[int, list[int]] = {}  # view -> its valid instances (those with source views)
+        for v, k in sorted(self.sources):
+            self.instances_of_view.setdefault(v, []).append(k)
 
     def __call__(self, trainer: Any, view: int, pixels: torch.Tensor, out: RenderOutput) -> dict[str, tuple[float, torch.Tensor]]:
         ids = self.ids[view, pixels]
         untrusted = self.untrusted[view, pixels]
-        per_instance = []
-        for k in torch.unique(ids[untrusted]).tolist():
-            srcs = self.sources.get((view, int(k)))
-            if not srcs:
-                continue
+        code_norm = self.normalisation == "code"
+        valid_instances = self.instances_of_view.get(view, [])
+        per_instance: list[torch.Tensor] = []
+        stats = {"untrusted_rays": float(untrusted.sum()), "rays": 0.0, "instances": 0.0,
+                 "instances_valid": float(len(valid_instances)), "wvalid_sum": 0.0, "gap_sum": 0.0}
+        for k in valid_instances:
             sel = torch.nonzero(untrusted & (ids == k))[:, 0]
+            if len(sel) == 0:
+                continue  # code: still counts in the denominator (instances_valid)
+            srcs = self.sources[(view, k)]
             o = trainer.rays.origins[view]
             d = trainer.rays.dirs[view, pixels[sel]]
             pts = (o[None, None, :] + d[:, None, :] * out.t[sel][..., None]) * self.scale + self.centre  # world (r, S, 3)
             w = out.weights[sel]  # (r, S), differentiable
             ref = trainer.rgb[view, pixels[sel]]  # (r, 3)
-            losses = []
+            per_source: list[torch.Tensor] = []
+            counted_any = False
             for j in srcs:
                 pc = pts @ self.w2c[j, :3, :3].T + self.w2c[j, :3, 3]
                 z = pc[..., 2].clamp_min(1e-6)
@@ -109,14 +147,50 @@ class MaskConstraint:
                 grid = torch.stack([u / (self.W - 1) * 2 - 1, v / (self.H - 1) * 2 - 1], -1).reshape(1, -1, 1, 2)
                 src = torch.cat([self.images[j], (self.ids_img[j] == k).float()[None]], 0)[None]  # (1, 4, H, W)
                 samp = F.grid_sample(src, grid, mode="bilinear", align_corners=True).reshape(4, *u.shape)  # (4, r, S)
-                valid = (inside & (samp[3] > 0.5)).float()
+                in_mask = samp[3] > self.hit_threshold
+                valid = (inside & in_mask).float()
                 wv = w * valid
                 warped = (wv[..., None] * samp[:3].permute(1, 2, 0)).sum(1)  # (r, 3)
-                count = (wv.sum(-1) > 0.01) & (valid.sum(-1) > 0)
+                if self.count_rule == "code":
+                    count = ((w * inside.float()).sum(-1) > 0.01) & (in_mask.sum(-1) > 0)
+                else:
+                    count = (wv.sum(-1) > 0.01) & (valid.sum(-1) > 0)
+                l1 = (warped - ref).abs().mean(-1)  # (r,) mean over the channels (code)
                 if count.any():
-                    losses.append((warped[count] - ref[count]).abs().mean())
-            if losses:
-                per_instance.append(torch.stack(losses).mean())
+                    counted_any = True
+                    with torch.no_grad():
+                        stats["rays"] += float(count.sum())
+                        stats["wvalid_sum"] += float(wv.sum(-1)[count].sum())
+                        stats["gap_sum"] += float((ref - warped).mean(-1)[count].sum())
+                if code_norm:
+                    cnt = count.float()
+                    per_source.append((l1 * cnt).sum() / (cnt.sum() + 1e-6))
+                elif count.any():
+                    per_source.append(l1[count].mean())
+            stats["instances"] += float(counted_any)
+            if per_source:
+                per_instance.append(torch.stack(per_source).mean())
+        self._accumulate(stats)
         if not per_instance:
             return {"mask": (self.weight, torch.zeros(()))}
+        if code_norm:
+            return {"mask": (self.weight, torch.stack(per_instance).sum() / (len(valid_instances) + 1e-6))}
         return {"mask": (self.weight, torch.stack(per_instance).mean())}
+
+    def _accumulate(self, stats: dict[str, float]) -> None:
+        for key, val in stats.items():
+            self._sums[key] = self._sums.get(key, 0.0) + val
+        self._steps += 1
+
+    def diagnostics(self) -> dict[str, float]:
+        """The module docstring's diagnostics, averaged over the steps since the last call (then reset);
+        empty before the first step."""
+        if self._steps == 0:
+            return {}
+        n, s = self._steps, self._sums
+        out = {f"mask_{k}": s[k] / n for k in ("untrusted_rays", "rays", "instances", "instances_valid")}
+        if s["rays"] > 0:
+            out["mask_wvalid_mean"] = s["wvalid_sum"] / s["rays"]
+            out["mask_color_gap"] = s["gap_sum"] / s["rays"]
+        self._sums, self._steps = {}, 0
+        return out

@@ -110,5 +110,7 @@ class MonoInstance:
         if config["guided_sampling"]:
             trainer.pixel_sampler = GuidedSampler(ids, result.is_background, U, prob_offset=float(config["sampling_prob_offset"]))
         if config["mask_constraint"]:
-            trainer.extra_losses.append(MaskConstraint(trainer, ids, result.is_background, c <= 0, config))
+            mask_term = MaskConstraint(trainer, ids, result.is_background, c <= 0, config)
+            trainer.extra_losses.append(mask_term)
+            trainer.diagnostic_sources.append(mask_term.diagnostics)
         return U

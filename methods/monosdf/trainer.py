@@ -92,6 +92,7 @@ class MonoSDFTrainer:
         self.prune_weight = float(cfg.get("prune_weight", 0.0) or 0.0)  # 0 = every sample with gradients (MonoSDF)
         self.pixel_sampler: PixelSampler = lambda v, n, g: torch.randint(0, HW, (n,), generator=g)  # noqa: E731
         self.extra_losses: list[Callable[..., dict[str, tuple[float, torch.Tensor]]]] = []
+        self.diagnostic_sources: list[Callable[[], dict[str, float]]] = []  # their numbers join diagnostics() (MonoInstance's mask term)
 
         spec = make_grid_spec(cfg["grid_levels"], cfg["grid_features"], cfg["grid_log2_table"], cfg["grid_base_res"], cfg["grid_max_res"])
         self.sdf = SDFNetwork(spec, hidden=cfg["mlp_hidden"], layers=cfg["mlp_layers"], geo_features=cfg["geo_features"],
@@ -277,6 +278,9 @@ class MonoSDFTrainer:
             self._prunable_frac = float((out.weights.detach() > self.prune_weight).float().mean())
         stats = {"samples_weighted": float((out.weights.detach() > WEIGHTED_SAMPLE).sum(-1).float().mean()),
                  "samples_rendered": out.kept / R}  # per ray, with gradients (n_coarse + n_fine unless pruned)
+        total = abs(logs["loss"])
+        for k, (wt, v) in terms.items():  # each weighted term's share of the total loss
+            stats[f"share_{k}"] = wt * float(v.detach()) / total if total > 0 else 0.0
         for k, v in {**logs, **stats}.items():
             self._log_sums[k] = self._log_sums.get(k, 0.0) + v
         self._log_count += 1
@@ -284,7 +288,8 @@ class MonoSDFTrainer:
 
     def diagnostics(self, mesh: trimesh.Trimesh | None = None) -> dict[str, float]:
         """Numbers for the convergence study at a snapshot: ``beta``; ``loss_<term>``, each loss term
-        averaged over the steps since the previous call (then reset); ``depth_neg_scale_frac``, the fraction
+        averaged over the steps since the previous call (then reset), and ``share_<term>``, its weighted share
+        of the total loss (same average); the numbers of every :attr:`diagnostic_sources` callable; ``depth_neg_scale_frac``, the fraction
         of the per-image depth fits since then whose scale was <= 0 (rendered depth anti-correlated with the
         prior), and ``depth_fit_scale_median``, their median scale (prior units per normalised unit: with an
         exact metric prior the scene's metres per unit, so another value is a scaled geometry); with ``diag_views`` > 0 and GT depth,
@@ -302,7 +307,9 @@ class MonoSDFTrainer:
         per-batch fitted scales."""
         out = {"beta": float(self.density.beta().detach())}
         n = max(self._log_count, 1)
-        out.update({(k if k.startswith("samples_") else f"loss_{k}"): v / n for k, v in self._log_sums.items() if k != "beta"})
+        out.update({(k if k.startswith(("samples_", "share_")) else f"loss_{k}"): v / n for k, v in self._log_sums.items() if k != "beta"})
+        for source in self.diagnostic_sources:
+            out.update(source())
         if self._depth_scales:
             out["depth_neg_scale_frac"] = float(np.mean(np.asarray(self._depth_scales) <= 0))
             out["depth_fit_scale_median"] = float(np.median(self._depth_scales))

@@ -87,3 +87,38 @@ def test_mask_constraint_loss_is_finite_and_reaches_the_sdf(tiny_scene):
     grads = [p.grad for p in tr.sdf.parameters() if p.grad is not None]
     assert grads and all(torch.isfinite(g).all() for g in grads)
     assert sum(float(g.abs().sum()) for g in grads) > 0  # the loss moves the geometry (through the weights)
+
+
+def test_mask_constraint_options_and_diagnostics(tiny_scene):
+    """The official code's normalisation never exceeds ours (its denominators count empty sources and
+    instances too), a lower mask-hit threshold counts at least as many rays, and the diagnostics describe
+    the counted rays (issue 15: rays, instances, sum of w * valid, reference - warped colour)."""
+    from methods.monoinstance.mask_constraint import MaskConstraint
+    from methods.monosdf.trainer import MonoSDFTrainer
+
+    cfg = method_config("monoinstance", "tiny", {"rays_per_batch": 64})
+    tr = MonoSDFTrainer(tiny_scene, cfg, seed=0)
+    ids = tiny_scene.gt_instance[tr.views]
+    bg = {i: info.is_background for i, info in tiny_scene.instances.items()}
+    untrusted = np.isin(ids, [i for i, b in bg.items() if not b])
+    base = {**cfg, "mask_max_ray_dist": 1.0, "mask_min_views": 2}
+    view = next(iter(MaskConstraint(tr, ids, bg, untrusted, base).sources))[0]
+    pixels = torch.randperm(ids[view].size, generator=torch.Generator().manual_seed(0))[:256]
+    with torch.no_grad():
+        out = tr.render_pixels(view, pixels)
+    results = {}
+    for norm in ("code", "ours"):
+        for hit in (0.0, 0.5):
+            mc = MaskConstraint(tr, ids, bg, untrusted, {**base, "mask_normalisation": norm, "mask_hit_threshold": hit})
+            loss = float(mc(tr, view, pixels, out)["mask"][1])
+            results[norm, hit] = (loss, mc.diagnostics())
+    for hit in (0.0, 0.5):
+        assert results["code", hit][0] <= results["ours", hit][0] + 1e-6
+    diag0, diag5 = results["code", 0.0][1], results["code", 0.5][1]
+    assert diag0["mask_rays"] >= diag5["mask_rays"] > 0
+    assert 0 < diag0["mask_instances"] <= diag0["mask_instances_valid"]
+    assert diag0["mask_untrusted_rays"] > 0
+    assert 0.0 < diag0["mask_wvalid_mean"] <= 1.0 + 1e-5 and -1.0 <= diag0["mask_color_gap"] <= 1.0
+    assert mc.diagnostics() == {}  # reset by the call above
+    with pytest.raises(ValueError, match="mask_normalisation"):
+        MaskConstraint(tr, ids, bg, untrusted, {**base, "mask_normalisation": "paper"})
