@@ -15,6 +15,9 @@ Where our port and the official code can differ, a config key chooses (default: 
 * ``mask_count_rule``: which rays count. ``code``: ``sum_i w_i inside_i > 0.01`` (projections inside the image
   carry weight) and at least one sample in the mask; ``ours``: ``sum_i w_i valid_i > 0.01`` (weight inside
   the mask) and at least one valid sample.
+* ``mask_source_choice``: ``random`` (code): ``n_source`` of all valid nearby views drawn at random every
+  step; ``nearest``: the fixed ``n_source`` nearest by ray distance.
+* ``mask_erode_px``: an instance's rays come from its mask eroded by this square (code: 2; 0 = the mask).
 * ``mask_normalisation``. ``code``: per source view, the sum over counted rays / (their count + 1e-6) (0
   without any); the mean over the instance's sources, empty ones counting 0; the sum over instances divided
   by the number of the view's valid instances (those with source views), also those with no untrusted ray
@@ -56,6 +59,25 @@ def _ray_distance(o1: np.ndarray, d1: np.ndarray, o2: np.ndarray, d2: np.ndarray
     return float(abs((o2 - o1) @ n) / nn)
 
 
+def eroded_instances(instance_ids: np.ndarray, size: int) -> np.ndarray:
+    """(V, H, W) instance ids with every instance's mask eroded by a ``size`` x ``size`` square (the official
+    code takes an instance's rays from its 2 x 2-eroded mask, cv2 style: the image border does not erode);
+    ``size`` <= 1 returns the ids unchanged."""
+    if size <= 1:
+        return instance_ids.astype(np.int64)
+    from scipy.ndimage import binary_erosion
+
+    out = np.zeros(instance_ids.shape, dtype=np.int64)
+    structure = np.ones((size, size), dtype=bool)
+    for v in range(instance_ids.shape[0]):
+        for k in np.unique(instance_ids[v]):
+            if k == 0:
+                continue
+            keep = binary_erosion(instance_ids[v] == k, structure=structure, border_value=1)
+            out[v][keep] = k
+    return out
+
+
 class MaskConstraint:
     """Callable extra loss for :class:`methods.monosdf.trainer.MonoSDFTrainer` (``extra_losses``)."""
 
@@ -71,12 +93,19 @@ class MaskConstraint:
         for key, val in (("mask_count_rule", self.count_rule), ("mask_normalisation", self.normalisation)):
             if val not in ("code", "ours"):
                 raise ValueError(f"{key} must be 'code' (official release) or 'ours', got {val!r}")
+        self.source_choice = str(cfg.get("mask_source_choice", "random"))
+        if self.source_choice not in ("random", "nearest"):
+            raise ValueError(f"mask_source_choice must be 'random' (official release) or 'nearest', got {self.source_choice!r}")
+        erode = int(cfg.get("mask_erode_px", 2))
+        if erode < 0:
+            raise ValueError(f"mask_erode_px must be >= 0, got {erode}")
         self._sums: dict[str, float] = {}
         self._steps = 0
         scene, views = trainer.scene, trainer.views
         V, H, W = instance_ids.shape
         self.H, self.W = H, W
         self.ids = torch.from_numpy(instance_ids.astype(np.int64)).reshape(V, -1)
+        self.members = torch.from_numpy(eroded_instances(instance_ids, erode)).reshape(V, -1)  # the rays each instance warps
         self.images = torch.from_numpy(np.ascontiguousarray(scene.images[views].transpose(0, 3, 1, 2)).astype(np.float32))
         self.ids_img = torch.from_numpy(instance_ids.astype(np.int64))
         rays = trainer.rays
@@ -98,7 +127,9 @@ class MaskConstraint:
                 cy, cx = int(round((ys.min() + ys.max()) / 2)), int(round((xs.min() + xs.max()) / 2))
                 centres.setdefault(int(k), {})[v] = rays.dirs[v, cy * W + cx].numpy().astype(np.float64)
         origins = rays.origins.numpy().astype(np.float64)
-        self.sources: dict[tuple[int, int], list[int]] = {}
+        self.n_source = int(cfg["mask_n_source"])
+        self.candidates: dict[tuple[int, int], list[int]] = {}  # (view, instance) -> every valid source view, nearest first
+        self.sources: dict[tuple[int, int], list[int]] = {}  # ... the n_source nearest (``mask_source_choice: nearest``)
         lo, hi = np.deg2rad(cfg["mask_min_angle_deg"]), np.deg2rad(cfg["mask_max_angle_deg"])
         for k, per_view in centres.items():
             if len(per_view) < int(cfg["mask_min_views"]):
@@ -113,13 +144,14 @@ class MaskConstraint:
                     if lo < ang < hi and dist < float(cfg["mask_max_ray_dist"]):
                         cands.append((dist, j))
                 if cands:
-                    self.sources[(v, k)] = [j for _, j in sorted(cands)[: int(cfg["mask_n_source"])]]
+                    self.candidates[(v, k)] = [j for _, j in sorted(cands)]
+                    self.sources[(v, k)] = self.candidates[(v, k)][: self.n_source]
         self.instances_of_view: dict[int, list[int]] = {}  # view -> its valid instances (those with source views)
         for v, k in sorted(self.sources):
             self.instances_of_view.setdefault(v, []).append(k)
 
     def __call__(self, trainer: Any, view: int, pixels: torch.Tensor, out: RenderOutput) -> dict[str, tuple[float, torch.Tensor]]:
-        ids = self.ids[view, pixels]
+        ids = self.members[view, pixels]
         untrusted = self.untrusted[view, pixels]
         code_norm = self.normalisation == "code"
         valid_instances = self.instances_of_view.get(view, [])
@@ -130,7 +162,7 @@ class MaskConstraint:
             sel = torch.nonzero(untrusted & (ids == k))[:, 0]
             if len(sel) == 0:
                 continue  # code: still counts in the denominator (instances_valid)
-            srcs = self.sources[(view, k)]
+            srcs = self._choose_sources(view, k, trainer.gen)
             o = trainer.rays.origins[view]
             d = trainer.rays.dirs[view, pixels[sel]]
             pts = (o[None, None, :] + d[:, None, :] * out.t[sel][..., None]) * self.scale + self.centre  # world (r, S, 3)
@@ -176,6 +208,18 @@ class MaskConstraint:
         if code_norm:
             return {"mask": (self.weight, torch.stack(per_instance).sum() / (len(valid_instances) + 1e-6))}
         return {"mask": (self.weight, torch.stack(per_instance).mean())}
+
+    def _choose_sources(self, view: int, k: int, gen: torch.Generator) -> list[int]:
+        """``nearest``: the fixed ``n_source`` nearest views. ``random`` (code): ``n_source`` of the valid views
+        drawn at random every step, without replacement when there are enough, else with."""
+        if self.source_choice == "nearest":
+            return self.sources[(view, k)]
+        cands = self.candidates[(view, k)]
+        if len(cands) >= self.n_source:
+            pick = torch.randperm(len(cands), generator=gen)[: self.n_source]
+        else:
+            pick = torch.randint(0, len(cands), (self.n_source,), generator=gen)
+        return [cands[int(i)] for i in pick]
 
     def _accumulate(self, stats: dict[str, float]) -> None:
         for key, val in stats.items():

@@ -12,7 +12,8 @@ instances, density uncertainty). Stage 2: the modules switched on by config -
 
 With all three off this is exactly MonoSDF (no stage in between): the ablation's Base row. The four
 rows of Table 4 are configs of this one method. Optional code-only final phase
-(``final_phase_fraction``): mask constraint off, depth weight 0.1, normal weight 0.005.
+(``final_phase_fraction``): mask constraint off, depth weight 0.1, normal weight 0.005, network lr 1e-5
+(``final_phase_depth_weight`` / ``final_phase_normal_weight`` / ``final_phase_lr``).
 """
 
 from __future__ import annotations
@@ -69,10 +70,13 @@ class MonoInstance:
             stage1_end = max(1, int(round(float(config["stage1_fraction"]) * total)))
             events[stage1_end] = lambda: stage.update(U=self._between_stages(trainer, scene, config, seed, timings, extra))
             final_start = total - int(round(float(config["final_phase_fraction"]) * total))
-            if final_start < total:  # code-only final phase: no mask constraint, depth 0.1, normal 0.005
+            if final_start < total:  # code-only final phase: no mask constraint, its own depth / normal weights and lr
                 def final_phase() -> None:
                     trainer.extra_losses.clear()
-                    trainer.cfg = {**trainer.cfg, "depth_weight": 0.1, "normal_weight": 0.005}
+                    trainer.cfg = {**trainer.cfg, "depth_weight": float(config["final_phase_depth_weight"]),
+                                   "normal_weight": float(config["final_phase_normal_weight"])}
+                    if config["final_phase_lr"] is not None:
+                        trainer.fixed_lr = float(config["final_phase_lr"])
 
                 events[max(final_start, stage1_end)] = final_phase if final_start > stage1_end else _chain(events[stage1_end], final_phase)
         snapshots, train_s, mesh_s = train_with_snapshots(trainer, total, list(config["fractions"]), int(config["mesh_resolution"]),

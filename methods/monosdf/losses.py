@@ -88,6 +88,37 @@ def ssi_depth_fit(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor
     return loss, s.detach()
 
 
+def ssi_depth_fit_code(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor, crosses: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """The official MonoInstance release's form of the depth loss (``model/loss.py``): the scale and shift
+    are fitted over a BINARY mask (rays whose SDF changes sign along them, with rendered and prior depth
+    > 0), the squared residual is weighted by the per-ray certainty and divided by 2 x the number of
+    masked rays (MiDaS' ``mse_loss``); 0 when no ray is masked or every weight is 0.
+
+    Args:
+        pred, target, weight: (R,) as in :func:`ssi_depth_fit`. crosses: (R,) bool, the SDF changes sign
+            along the ray.
+
+    Returns:
+        (scalar loss, the fitted scale (detached)).
+    """
+    mask = (crosses & (pred > 0) & (target > 0)).to(pred.dtype)
+    s, t = solve_scale_shift(pred, target, mask)
+    res = s * pred + t - target
+    loss = (mask * weight * res * res).sum() / (2.0 * mask.sum()).clamp_min(1.0)
+    if float(weight.sum()) == 0.0:
+        loss = loss * 0.0  # the release skips the term; kept in the graph with a zero gradient
+    return loss, s.detach()
+
+
+def normal_loss_code(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """The official MonoInstance release's normal terms: ``mean(weight * l1)`` and ``mean(weight * (1 - cos))``
+    over ALL rays (the certainty scales the terms down instead of renormalising them as :func:`normal_loss`
+    does). pred, target: (R, 3); weight: (R,)."""
+    p = F.normalize(pred, dim=-1, eps=1e-8)
+    q = F.normalize(target, dim=-1, eps=1e-8)
+    return (weight * (p - q).abs().sum(-1)).mean(), (weight * (1.0 - (p * q).sum(-1))).mean()
+
+
 def ssi_depth_loss(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
     """:func:`ssi_depth_fit`'s loss with MonoSDF's behaviour (every fitted scale kept)."""
     return ssi_depth_fit(pred, target, weight)[0]

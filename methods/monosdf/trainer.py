@@ -26,7 +26,7 @@ from bench.scene import Scene
 from methods.base import Snapshot
 from methods.monosdf.field import ColorNetwork, LaplaceDensity, SDFNetwork
 from methods.monosdf.grid import make_grid_spec
-from methods.monosdf.losses import color_loss, eikonal_loss, normal_loss, smoothness_loss, ssi_depth_fit
+from methods.monosdf.losses import color_loss, eikonal_loss, normal_loss, normal_loss_code, smoothness_loss, ssi_depth_fit, ssi_depth_fit_code
 from methods.monosdf.rays import build_rays, normalisation
 from methods.monosdf.render import RenderOutput, hierarchical_samples, render_depth, render_rays
 
@@ -89,6 +89,9 @@ class MonoSDFTrainer:
         if fit not in ("ssi", "metric"):
             raise ValueError(f"depth_fit must be 'ssi' (MonoSDF) or 'metric' (diagnostic), got {fit!r}")
         self.depth_fixed_scale = self.rays.scale if fit == "metric" else None  # metric: the scene's metres per unit
+        self.prior_loss_form = str(cfg.get("prior_loss_form", "monosdf"))
+        if self.prior_loss_form not in ("monosdf", "code"):
+            raise ValueError(f"prior_loss_form must be 'monosdf' or 'code' (the MonoInstance release's), got {self.prior_loss_form!r}")
         self.prune_weight = float(cfg.get("prune_weight", 0.0) or 0.0)  # 0 = every sample with gradients (MonoSDF)
         self.pixel_sampler: PixelSampler = lambda v, n, g: torch.randint(0, HW, (n,), generator=g)  # noqa: E731
         self.extra_losses: list[Callable[..., dict[str, tuple[float, torch.Tensor]]]] = []
@@ -111,6 +114,7 @@ class MonoSDFTrainer:
             {"params": list(self.density.parameters()), "lr": lr * float(cfg.get("beta_lr_factor", 1.0))},
         ], betas=(0.9, 0.99), eps=1e-15, fused=True)
         self.base_lrs = [g["lr"] for g in self.optim.param_groups]
+        self.fixed_lr: float | None = None  # set: the network lr from now on (no decay), other groups at their factors
         self.step_count = 0
         self._log_sums: dict[str, float] = {}
         self._log_count = 0
@@ -152,6 +156,10 @@ class MonoSDFTrainer:
         self.density.beta_min = float(self.cfg["beta_min"]) + extra
 
     def _set_lr(self) -> None:
+        if self.fixed_lr is not None:  # a phase with its own learning rate (MonoInstance's code-only final phase)
+            for g, base in zip(self.optim.param_groups, self.base_lrs):
+                g["lr"] = base * self.fixed_lr / float(self.cfg["lr"])  # every group keeps its factor to the network lr
+            return
         frac = min(self.step_count / max(int(self.cfg["iterations"]), 1), 1.0)
         decay = float(self.cfg["lr_decay"]) ** frac * max(self._warmup("lr_warmup"), 1e-2)
         for g, base in zip(self.optim.param_groups, self.base_lrs):
@@ -172,13 +180,18 @@ class MonoSDFTrainer:
         cfg = self.cfg
         terms: dict[str, tuple[float, torch.Tensor]] = {}
         w = self.prior_weight[view, pixels]
+        code_form = self.prior_loss_form == "code"
         if self.prior_depth is not None and cfg["depth_weight"] > 0:
-            loss, scale = ssi_depth_fit(out.depth, self.prior_depth[view, pixels], w, str(cfg.get("depth_negative_scale", "keep")),
-                                        fixed_scale=self.depth_fixed_scale)
+            if code_form:
+                crosses = (out.sdf.detach() > 0).any(-1) & (out.sdf.detach() < 0).any(-1)
+                loss, scale = ssi_depth_fit_code(out.depth, self.prior_depth[view, pixels], w, crosses)
+            else:
+                loss, scale = ssi_depth_fit(out.depth, self.prior_depth[view, pixels], w, str(cfg.get("depth_negative_scale", "keep")),
+                                            fixed_scale=self.depth_fixed_scale)
             terms["depth"] = (float(cfg["depth_weight"]) * self._warmup("depth_warmup"), loss)
             self._depth_scales.append(float(scale))  # prior units per normalised unit (exact metric prior: the scene scale)
         if self.prior_normal is not None and cfg["normal_weight"] > 0:
-            l1, ang = normal_loss(out.normal, self.prior_normal[view, pixels], w)
+            l1, ang = (normal_loss_code if code_form else normal_loss)(out.normal, self.prior_normal[view, pixels], w)
             terms["normal_l1"] = (float(cfg["normal_weight"]), l1)
             terms["normal_cos"] = (float(cfg["normal_weight"]), ang)
         for extra in self.extra_losses:

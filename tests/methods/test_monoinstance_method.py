@@ -101,7 +101,7 @@ def test_mask_constraint_options_and_diagnostics(tiny_scene):
     ids = tiny_scene.gt_instance[tr.views]
     bg = {i: info.is_background for i, info in tiny_scene.instances.items()}
     untrusted = np.isin(ids, [i for i, b in bg.items() if not b])
-    base = {**cfg, "mask_max_ray_dist": 1.0, "mask_min_views": 2}
+    base = {**cfg, "mask_max_ray_dist": 1.0, "mask_min_views": 2, "mask_source_choice": "nearest"}  # the same sources in every call
     view = next(iter(MaskConstraint(tr, ids, bg, untrusted, base).sources))[0]
     pixels = torch.randperm(ids[view].size, generator=torch.Generator().manual_seed(0))[:256]
     with torch.no_grad():
@@ -122,3 +122,42 @@ def test_mask_constraint_options_and_diagnostics(tiny_scene):
     assert mc.diagnostics() == {}  # reset by the call above
     with pytest.raises(ValueError, match="mask_normalisation"):
         MaskConstraint(tr, ids, bg, untrusted, {**base, "mask_normalisation": "paper"})
+
+
+def test_mask_sources_are_drawn_among_the_valid_views_and_rays_come_from_eroded_masks(tiny_scene):
+    from methods.monoinstance.mask_constraint import MaskConstraint, eroded_instances
+    from methods.monosdf.trainer import MonoSDFTrainer
+
+    ids = np.zeros((1, 6, 7), dtype=np.int64)
+    ids[0, 1:4, 1:5] = 3  # a 3 x 4 block
+    ids[0, :, 5:7] = 5  # two full-height columns on the image border: the border does not erode (cv2 style)
+    er = eroded_instances(ids, 2)
+    assert (er[0] == 3).sum() == 2 * 3 and (er[0] == 5).sum() == 6 and set(np.unique(er)) <= {0, 3, 5}
+    assert (eroded_instances(ids, 0) == ids).all()
+
+    cfg = method_config("monoinstance", "tiny", {"rays_per_batch": 64})
+    tr = MonoSDFTrainer(tiny_scene, cfg, seed=0)
+    tids = tiny_scene.gt_instance[tr.views]
+    bg = {i: info.is_background for i, info in tiny_scene.instances.items()}
+    untrusted = np.isin(tids, [i for i, b in bg.items() if not b])
+    mc = MaskConstraint(tr, tids, bg, untrusted, {**cfg, "mask_max_ray_dist": 1.0, "mask_min_views": 2, "mask_n_source": 2})
+    key = max(mc.candidates, key=lambda kv: len(mc.candidates[kv]))
+    draws = [tuple(mc._choose_sources(*key, tr.gen)) for _ in range(40)]
+    assert all(len(d) == 2 and set(d) <= set(mc.candidates[key]) for d in draws)
+    if len(mc.candidates[key]) > 2:
+        assert len(set(draws)) > 1  # drawn anew every step, not the fixed nearest pair
+
+
+def test_final_phase_learning_rate_holds_every_group_at_its_factor(tiny_scene):
+    """The code-only final phase trains at a fixed network lr (1e-5 in the release): every optimiser group
+    keeps its factor to the network lr (grid x grid_lr_factor), no decay."""
+    from methods.monosdf.trainer import MonoSDFTrainer
+
+    cfg = method_config("monoinstance", "tiny", {"rays_per_batch": 32})
+    tr = MonoSDFTrainer(tiny_scene, cfg, seed=0)
+    tr.step()
+    tr.fixed_lr = float(cfg["final_phase_lr"])
+    for _ in range(2):
+        tr.step()
+        lrs = [g["lr"] for g in tr.optim.param_groups]
+        assert lrs[0] == pytest.approx(1e-5 * float(cfg["grid_lr_factor"])) and lrs[1] == pytest.approx(1e-5)

@@ -543,3 +543,42 @@ def test_metric_depth_fit_diagnostic_pins_the_scale():
     assert float(loss_exact) < 1e-10 and float(s) == pytest.approx(3.15) and float(loss_shrunk) > 1e-3
     loss_shrunk.backward()
     assert torch.isfinite(shrunk.grad).all() and float(shrunk.grad.abs().sum()) > 0
+
+
+def test_code_form_of_the_prior_losses():
+    """The MonoInstance release's depth loss: binary-mask fit over rays whose SDF changes sign, c-weighted
+    residual / (2 x masked rays); 0 (finite, zero gradient) without masked rays or with all weights 0. Its
+    normal terms are means over all rays of c x term."""
+    from methods.monosdf.losses import normal_loss_code, ssi_depth_fit_code
+
+    torch.manual_seed(0)
+    pred = (torch.rand(64) + 0.5).requires_grad_(True)
+    target = 2.0 * pred.detach() + 0.3 + 0.05 * torch.randn(64)
+    w = torch.rand(64)
+    crosses = torch.rand(64) > 0.3
+    loss, scale = ssi_depth_fit_code(pred, target, w, crosses)
+    m = crosses.float()
+    s, t = solve_scale_shift(pred.detach(), target, m)
+    want = (m * w * (s * pred.detach() + t - target) ** 2).sum() / (2 * m.sum())
+    assert float(loss) == pytest.approx(float(want), rel=1e-4) and float(scale) == pytest.approx(float(s), rel=1e-4)
+    loss.backward()
+    assert torch.isfinite(pred.grad).all() and float(pred.grad[~crosses].abs().max()) == 0.0
+    for crossing, weight in ((torch.zeros(64, dtype=torch.bool), w), (crosses, torch.zeros(64))):
+        p = pred.detach().clone().requires_grad_(True)
+        zero, _ = ssi_depth_fit_code(p, target, weight, crossing)
+        zero.backward()
+        assert float(zero) == 0.0 and torch.isfinite(p.grad).all()
+    n = torch.nn.functional.normalize(torch.randn(64, 3), dim=-1)
+    l1, ang = normal_loss_code(n, n, w)
+    assert float(l1) == pytest.approx(0.0, abs=1e-6) and float(ang) == pytest.approx(0.0, abs=1e-6)
+    l1, ang = normal_loss_code(n, -n, torch.ones(64))
+    assert float(ang) == pytest.approx(2.0, abs=1e-5)
+
+
+def test_trainer_with_the_code_form_of_the_prior_losses_steps_finitely(tiny_scene):
+    tr = _trainer(tiny_scene, prior_loss_form="code")
+    for _ in range(3):
+        logs = tr.step()
+    assert all(np.isfinite(v) for v in logs.values()) and {"depth", "normal_l1"} <= set(logs)
+    with pytest.raises(ValueError, match="prior_loss_form"):
+        _trainer(tiny_scene, prior_loss_form="paper")
