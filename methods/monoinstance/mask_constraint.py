@@ -18,6 +18,9 @@ Where our port and the official code can differ, a config key chooses (default: 
 * ``mask_source_choice``: ``random`` (code): ``n_source`` of all valid nearby views drawn at random every
   step; ``nearest``: the fixed ``n_source`` nearest by ray distance.
 * ``mask_erode_px``: an instance's rays come from its mask eroded by this square (code: 2; 0 = the mask).
+* ``mask_renormalise`` (a DIAGNOSTIC, neither code nor paper): divide the warped colour by ``sum_i w_i valid_i``,
+  which removes the darkening a spread-out or partly-outside ray weight causes (the targeted experiment of
+  the mechanism in docs/uncertainty.md).
 * ``mask_normalisation``. ``code``: per source view, the sum over counted rays / (their count + 1e-6) (0
   without any); the mean over the instance's sources, empty ones counting 0; the sum over instances divided
   by the number of the view's valid instances (those with source views), also those with no untrusted ray
@@ -93,6 +96,7 @@ class MaskConstraint:
         for key, val in (("mask_count_rule", self.count_rule), ("mask_normalisation", self.normalisation)):
             if val not in ("code", "ours"):
                 raise ValueError(f"{key} must be 'code' (official release) or 'ours', got {val!r}")
+        self.renormalise = bool(cfg.get("mask_renormalise", False))
         self.source_choice = str(cfg.get("mask_source_choice", "random"))
         if self.source_choice not in ("random", "nearest"):
             raise ValueError(f"mask_source_choice must be 'random' (official release) or 'nearest', got {self.source_choice!r}")
@@ -183,6 +187,8 @@ class MaskConstraint:
                 valid = (inside & in_mask).float()
                 wv = w * valid
                 warped = (wv[..., None] * samp[:3].permute(1, 2, 0)).sum(1)  # (r, 3)
+                if self.renormalise:  # DIAGNOSTIC: the warped colour without the darkening of sum(w valid) < 1
+                    warped = warped / wv.sum(-1, keepdim=True).clamp_min(1e-6)
                 if self.count_rule == "code":
                     count = ((w * inside.float()).sum(-1) > 0.01) & (in_mask.sum(-1) > 0)
                 else:

@@ -120,6 +120,10 @@ def test_mask_constraint_options_and_diagnostics(tiny_scene):
     assert diag0["mask_untrusted_rays"] > 0
     assert 0.0 < diag0["mask_wvalid_mean"] <= 1.0 + 1e-5 and -1.0 <= diag0["mask_color_gap"] <= 1.0
     assert mc.diagnostics() == {}  # reset by the call above
+    ren = MaskConstraint(tr, ids, bg, untrusted, {**base, "mask_renormalise": True})
+    float(ren(tr, view, pixels, out)["mask"][1])
+    gap = ren.diagnostics()["mask_color_gap"]
+    assert abs(gap) < abs(diag0["mask_color_gap"]) + 1e-6 or abs(gap) < 0.05  # the darkening bias is gone
     with pytest.raises(ValueError, match="mask_normalisation"):
         MaskConstraint(tr, ids, bg, untrusted, {**base, "mask_normalisation": "paper"})
 
