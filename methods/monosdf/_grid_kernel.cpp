@@ -11,8 +11,6 @@
 #include <torch/extension.h>
 #include <cmath>
 #include <cstdint>
-#include <cstdlib>
-#include <algorithm>
 #include <vector>
 #include <omp.h>
 
@@ -81,12 +79,13 @@ inline void cell_for(const float* xp, const Level& lv, Cell& c) {
     }
 }
 
-// Forward of one level for the points [p0, p1) (FT = features per level, 0 = runtime `F`).
+// Forward for one level over all points (FT = features per level, 0 = runtime `F`).
 template <int FT, bool WITH_JAC>
-inline void forward_range(const float* tp, const float* xp, const Level& lv, int64_t l, int64_t p0, int64_t p1, int64_t F_rt,
-                          int64_t C, float* fp, float* jp) {
+void forward_level(const float* tp, const float* xp, const Level& lv, int64_t l, int64_t P, int64_t F_rt, int64_t C,
+                   float* fp, float* jp) {
     const int64_t F = FT > 0 ? FT : F_rt;
-    for (int64_t p = p0; p < p1; ++p) {
+#pragma omp parallel for schedule(static)
+    for (int64_t p = 0; p < P; ++p) {
         Cell c;
         cell_for<WITH_JAC>(xp + 3 * p, lv, c);
         for (int64_t ff = 0; ff < F; ++ff) {
@@ -111,106 +110,55 @@ inline void forward_range(const float* tp, const float* xp, const Level& lv, int
     }
 }
 
-// Backward of one level for the points [p0, p1), scattered into this thread's copy `gt` of the table
-// gradient (no atomics).
+// Backward for one level: each thread scatters into its own copy of the table gradient (no atomics).
 template <int FT, bool HAS_FEAT, bool HAS_JAC>
-inline void backward_range(const float* gf, const float* gj, const float* xp, const Level& lv, int64_t l, int64_t p0, int64_t p1,
-                           int64_t F_rt, int64_t C, float* gt) {
+void backward_level(const float* gf, const float* gj, const float* xp, const Level& lv, int64_t l, int64_t P, int64_t F_rt,
+                    int64_t C, int64_t rows, float* part) {
     const int64_t F = FT > 0 ? FT : F_rt;
-    Cell c;
-    for (int64_t p = p0; p < p1; ++p) {
-        cell_for<HAS_JAC>(xp + 3 * p, lv, c);
-        for (int64_t ff = 0; ff < F; ++ff) {
-            const int64_t col = l * F + ff;
-            const float g = HAS_FEAT ? gf[p * C + col] : 0.f;
-            float g0 = 0.f, g1 = 0.f, g2 = 0.f;
-            if (HAS_JAC) {
-                g0 = gj[(p * 3 + 0) * C + col];
-                g1 = gj[(p * 3 + 1) * C + col];
-                g2 = gj[(p * 3 + 2) * C + col];
-            }
-            for (int k = 0; k < 8; ++k) {
-                float v = HAS_FEAT ? c.w[k] * g : 0.f;
-                if (HAS_JAC) v += c.dw[k][0] * g0 + c.dw[k][1] * g1 + c.dw[k][2] * g2;
-                gt[c.idx[k] * F + ff] += v;
+#pragma omp parallel
+    {
+        float* gt = part + (int64_t)omp_get_thread_num() * rows * F;
+        Cell c;
+#pragma omp for schedule(static)
+        for (int64_t p = 0; p < P; ++p) {
+            cell_for<HAS_JAC>(xp + 3 * p, lv, c);
+            for (int64_t ff = 0; ff < F; ++ff) {
+                const int64_t col = l * F + ff;
+                const float g = HAS_FEAT ? gf[p * C + col] : 0.f;
+                float g0 = 0.f, g1 = 0.f, g2 = 0.f;
+                if (HAS_JAC) {
+                    g0 = gj[(p * 3 + 0) * C + col];
+                    g1 = gj[(p * 3 + 1) * C + col];
+                    g2 = gj[(p * 3 + 2) * C + col];
+                }
+                for (int k = 0; k < 8; ++k) {
+                    float v = HAS_FEAT ? c.w[k] * g : 0.f;
+                    if (HAS_JAC) v += c.dw[k][0] * g0 + c.dw[k][1] * g1 + c.dw[k][2] * g2;
+                    gt[c.idx[k] * F + ff] += v;
+                }
             }
         }
     }
-}
-
-// Points are processed in blocks of `block` (0 = all points in one block per level). Within a block the
-// levels are the outer loop: one level's table slice is visited by all the block's points while it is
-// hot in cache, and the block's rows of feat / jac (or their gradients) stay in L2 across the levels.
-int64_t grid_block_size() {
-    static const int64_t b = [] {
-        const char* e = std::getenv("BENCH_GRID_BLOCK");
-        return e ? std::atoll(e) : (int64_t)0;
-    }();
-    return b;
 }
 
 template <int FT>
 void forward_all(const float* tp, const float* xp, const int64_t* mp, int64_t L, int64_t P, int64_t F, bool with_jac, float* fp, float* jp) {
     const int64_t C = L * F;
-    const int64_t block = grid_block_size();
-    if (block <= 0) {  // levels outer over all points, the points of each level split among the threads
-        for (int64_t l = 0; l < L; ++l) {
-            const Level lv = level_of(mp, l);
-#pragma omp parallel
-            {
-                const int nt = omp_get_num_threads(), tid = omp_get_thread_num();
-                const int64_t per = (P + nt - 1) / nt, p0 = std::min(P, per * tid), p1 = std::min(P, p0 + per);
-                if (with_jac) forward_range<FT, true>(tp, xp, lv, l, p0, p1, F, C, fp, jp);
-                else forward_range<FT, false>(tp, xp, lv, l, p0, p1, F, C, fp, jp);
-            }
-        }
-        return;
-    }
-    const int64_t nblocks = (P + block - 1) / block;
-#pragma omp parallel for schedule(dynamic, 1)
-    for (int64_t b = 0; b < nblocks; ++b) {
-        const int64_t p0 = b * block, p1 = std::min(P, p0 + block);
-        for (int64_t l = 0; l < L; ++l) {
-            const Level lv = level_of(mp, l);
-            if (with_jac) forward_range<FT, true>(tp, xp, lv, l, p0, p1, F, C, fp, jp);
-            else forward_range<FT, false>(tp, xp, lv, l, p0, p1, F, C, fp, jp);
-        }
+    for (int64_t l = 0; l < L; ++l) {
+        const Level lv = level_of(mp, l);
+        if (with_jac) forward_level<FT, true>(tp, xp, lv, l, P, F, C, fp, jp);
+        else forward_level<FT, false>(tp, xp, lv, l, P, F, C, fp, jp);
     }
 }
 
 template <int FT>
 void backward_all(const float* gf, const float* gj, const float* xp, const int64_t* mp, int64_t L, int64_t P, int64_t F, int64_t rows, float* part) {
     const int64_t C = L * F;
-    const int64_t block = grid_block_size();
-    if (block <= 0) {  // levels outer over all points, the points of each level split among the threads
-        for (int64_t l = 0; l < L; ++l) {
-            const Level lv = level_of(mp, l);
-#pragma omp parallel
-            {
-                const int nt = omp_get_num_threads(), tid = omp_get_thread_num();
-                float* gt = part + (int64_t)tid * rows * F;
-                const int64_t per = (P + nt - 1) / nt, p0 = std::min(P, per * tid), p1 = std::min(P, p0 + per);
-                if (gf && gj) backward_range<FT, true, true>(gf, gj, xp, lv, l, p0, p1, F, C, gt);
-                else if (gf) backward_range<FT, true, false>(gf, gj, xp, lv, l, p0, p1, F, C, gt);
-                else if (gj) backward_range<FT, false, true>(gf, gj, xp, lv, l, p0, p1, F, C, gt);
-            }
-        }
-        return;
-    }
-    const int64_t nblocks = (P + block - 1) / block;
-#pragma omp parallel
-    {
-        float* gt = part + (int64_t)omp_get_thread_num() * rows * F;
-#pragma omp for schedule(dynamic, 1)
-        for (int64_t b = 0; b < nblocks; ++b) {
-            const int64_t p0 = b * block, p1 = std::min(P, p0 + block);
-            for (int64_t l = 0; l < L; ++l) {
-                const Level lv = level_of(mp, l);
-                if (gf && gj) backward_range<FT, true, true>(gf, gj, xp, lv, l, p0, p1, F, C, gt);
-                else if (gf) backward_range<FT, true, false>(gf, gj, xp, lv, l, p0, p1, F, C, gt);
-                else if (gj) backward_range<FT, false, true>(gf, gj, xp, lv, l, p0, p1, F, C, gt);
-            }
-        }
+    for (int64_t l = 0; l < L; ++l) {
+        const Level lv = level_of(mp, l);
+        if (gf && gj) backward_level<FT, true, true>(gf, gj, xp, lv, l, P, F, C, rows, part);
+        else if (gf) backward_level<FT, true, false>(gf, gj, xp, lv, l, P, F, C, rows, part);
+        else if (gj) backward_level<FT, false, true>(gf, gj, xp, lv, l, P, F, C, rows, part);
     }
 }
 
