@@ -109,7 +109,7 @@ class SDFNetwork(torch.nn.Module):
         spec: feature-grid layout. hidden: MLP width. layers: hidden layers. geo_features: size of the
         geometry feature passed to the colour network. radius: bounding-sphere radius R (normalised
         units). init_radius: geometric-init sphere radius. inside_out: rooms (cameras inside).
-        fast_grid: use the C++ grid kernel.
+        fast_grid: use the C++ kernels (grid, softplus and slope, positional encoding and its chain rule).
     """
 
     def __init__(self, spec: GridSpec, hidden: int = 64, layers: int = 2, geo_features: int = 15, radius: float = 1.0,

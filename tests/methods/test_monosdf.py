@@ -133,6 +133,10 @@ def test_encoding_kernels_match_reference_values_and_gradient():
     g_fast = torch.autograd.grad((fast * w).sum(), gin)[0]
     g_ref = torch.autograd.grad((ref * w).sum(), gin)[0]
     torch.testing.assert_close(g_fast, g_ref, atol=1e-5, rtol=1e-5)
+    empty = torch.zeros(0, 3)  # e.g. a pruned pass with nothing left to evaluate
+    assert net.encode(empty).shape == (0, 39) and net.pe_chain(torch.zeros(0, 39), net.encode(empty)).shape == (0, 3)
+    sdf, _, grad = net(empty)
+    assert sdf.shape == (0,) and grad.shape == (0, 3)
 
 
 def test_linear_blocks_equals_linear_of_the_concatenation():
