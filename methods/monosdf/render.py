@@ -29,7 +29,8 @@ class RenderOutput:
         rgb: (R, 3); depth: (R,) z-depth in normalised units; normal: (R, 3) camera frame (not
         normalised); acc: (R,) sum of weights; weights: (R, S); grad: (R, S, 3) SDF gradients at the
         samples; sdf: (R, S); t: (R, S) sample distances; extra_grad: (E, 3) SDF gradients at the
-        ``extra_points`` (None without); kept: samples rendered with gradients (R * S unless pruned).
+        ``extra_points`` (None without); kept: samples rendered with gradients (R * S unless pruned);
+        kept_index: their flat indices into R * S (None = every sample).
     """
 
     rgb: torch.Tensor
@@ -42,6 +43,7 @@ class RenderOutput:
     t: torch.Tensor
     extra_grad: torch.Tensor | None = None
     kept: int = 0
+    kept_index: torch.Tensor | None = None  # (K,) flat indices (into R * S) of the samples rendered with gradients; None = all
 
     def select(self, rows: slice | torch.Tensor) -> "RenderOutput":
         """The same outputs for a subset of the rays (``extra_grad`` is dropped: it is not per ray)."""
@@ -233,4 +235,4 @@ def render_rays(
     else:
         n_cam = torch.einsum("rij,rj->ri", world_to_cam, n_world)
     return RenderOutput(rgb=rgb, depth=depth, normal=n_cam, acc=acc, weights=w, grad=grad.reshape(R, S, 3), sdf=sdf, t=t,
-                        extra_grad=extra_grad, kept=n_g)
+                        extra_grad=extra_grad, kept=n_g, kept_index=keep)

@@ -198,6 +198,39 @@ class MonoSDFTrainer:
             terms.update(extra(self, view, pixels, out))
         return terms
 
+    def _ray_sample_regularisers(self, out: RenderOutput, g_extra: torch.Tensor, R: int, rows: torch.Tensor, pick: torch.Tensor | None,
+                                 surf_in_extra: bool, mode: str, smooth_w: float) -> dict[str, tuple[float, torch.Tensor]]:
+        """MonoSDF's eikonal (R uniform points + one sample of each ray) and smoothness (each with a jittered
+        neighbour) terms; ``g_extra``: the SDF gradients of the extra points in :meth:`step`'s layout."""
+        cfg = self.cfg
+        terms: dict[str, tuple[float, torch.Tensor]] = {}
+        g_uni = g_extra[:R]
+        if surf_in_extra:
+            g_surf, g_extra = g_extra[R : 2 * R], torch.cat([g_extra[:R], g_extra[2 * R :]])
+        else:
+            if pick is None:
+                pick = out.weights.detach().argmax(-1)  # always rendered with gradients, also when pruned
+            g_surf = out.grad[rows, pick]
+        terms["eikonal"] = (float(cfg["eikonal_weight"]), eikonal_loss(torch.cat([g_uni, g_surf])))
+        if smooth_w > 0:
+            own = torch.cat([g_uni, g_surf]) if mode == "random" else g_uni  # random: the ray sample has a neighbour too
+            terms["smooth"] = (smooth_w, smoothness_loss(own, g_extra[R:]))
+        return terms
+
+    def _all_sample_regularisers(self, out: RenderOutput, g_neighbours: torch.Tensor, smooth_w: float) -> dict[str, tuple[float, torch.Tensor]]:
+        """The MonoInstance release's eikonal on every rendered ray sample and smoothness between each and its
+        jittered neighbour (``g_neighbours``: (R * S, 3), or empty without smoothness); with pruning, over the
+        samples rendered with gradients."""
+        cfg = self.cfg
+        g = out.grad.reshape(-1, 3)
+        if out.kept_index is not None:
+            g = g[out.kept_index]
+            g_neighbours = g_neighbours[out.kept_index] if smooth_w > 0 else g_neighbours
+        terms = {"eikonal": (float(cfg["eikonal_weight"]), eikonal_loss(g))}
+        if smooth_w > 0:
+            terms["smooth"] = (smooth_w, smoothness_loss(g, g_neighbours))
+        return terms
+
     def step(self, view: int | None = None) -> dict[str, float]:
         """One optimisation step; returns the loss terms.
 
@@ -235,9 +268,10 @@ class MonoSDFTrainer:
         uni = (torch.rand(R, 3, generator=self.gen) * 2 - 1) * self.radius
         rows = torch.arange(R)
         mode = str(cfg.get("eikonal_ray_sample", "max_weight"))
-        if mode not in ("random", "max_weight"):
-            raise ValueError(f"eikonal_ray_sample must be 'random' or 'max_weight', got {mode!r}")
+        if mode not in ("random", "max_weight", "all"):
+            raise ValueError(f"eikonal_ray_sample must be 'random', 'max_weight' or 'all' (the MonoInstance release), got {mode!r}")
         smooth_w = float(cfg.get("smooth_weight", 0.0))
+        jit = float(cfg.get("smooth_jitter", 0.01))
         pick = torch.randint(0, t.shape[1], (R,), generator=self.gen) if mode == "random" else None
         extra = [uni]
         surf = None if pick is None else origins + dirs * t[rows, pick][:, None]  # the random ray sample (R, 3)
@@ -245,8 +279,12 @@ class MonoSDFTrainer:
         surf_in_extra = surf is not None and prune > 0
         if surf_in_extra:
             extra.append(surf)
-        if smooth_w > 0:
-            jit = float(cfg.get("smooth_jitter", 0.01))
+        if mode == "all":  # the release: every ray sample and a jittered neighbour of each, no uniform points
+            extra = [uni[:0]]
+            if smooth_w > 0:
+                samples = (origins[:, None, :] + dirs[:, None, :] * t[..., None]).reshape(-1, 3)
+                extra.append(samples + (torch.rand(samples.shape, generator=self.gen) - 0.5) * jit)
+        elif smooth_w > 0:
             extra.append(uni + (torch.rand(R, 3, generator=self.gen) - 0.5) * jit)
             if surf is not None:
                 extra.append(surf + (torch.rand(R, 3, generator=self.gen) - 0.5) * jit)
@@ -256,18 +294,10 @@ class MonoSDFTrainer:
         terms: dict[str, tuple[float, torch.Tensor]] = {"color": (float(cfg["color_weight"]), color_loss(out.rgb, self.rgb[slot, pixels]))}
         g_extra = out.extra_grad
         assert g_extra is not None
-        g_uni = g_extra[:R]
-        if surf_in_extra:
-            g_surf, g_extra = g_extra[R : 2 * R], torch.cat([g_extra[:R], g_extra[2 * R :]])
+        if mode == "all":
+            terms.update(self._all_sample_regularisers(out, g_extra, smooth_w))
         else:
-            if pick is None:
-                pick = out.weights.detach().argmax(-1)  # always rendered with gradients, also when pruned
-            g_surf = out.grad[rows, pick]
-        terms["eikonal"] = (float(cfg["eikonal_weight"]), eikonal_loss(torch.cat([g_uni, g_surf])))
-        if smooth_w > 0:
-            own = torch.cat([g_uni, g_surf]) if mode == "random" else g_uni  # random: the ray sample has a neighbour too
-            terms["smooth"] = (smooth_w, smoothness_loss(own, g_extra[R:]))
-
+            terms.update(self._ray_sample_regularisers(out, g_extra, R, rows, pick, surf_in_extra, mode, smooth_w))
         per_image: dict[str, list[tuple[float, torch.Tensor]]] = {}
         start = 0
         for v, pix in groups:

@@ -586,3 +586,16 @@ def test_trainer_with_the_code_form_of_the_prior_losses_steps_finitely(tiny_scen
     assert all(np.isfinite(v) for v in logs.values()) and {"depth", "normal_l1"} <= set(logs)
     with pytest.raises(ValueError, match="prior_loss_form"):
         _trainer(tiny_scene, prior_loss_form="paper")
+
+
+@pytest.mark.parametrize("prune", [0.0, 1e-4])
+def test_eikonal_on_every_ray_sample_like_the_release(tiny_scene, prune):
+    """``eikonal_ray_sample: all`` (MonoInstance release): eikonal on every rendered ray sample, smoothness
+    against a jittered neighbour of each, no uniform points; finite losses and gradients, also pruned."""
+    tr = _trainer(tiny_scene, eikonal_ray_sample="all", prune_weight=prune)
+    for _ in range(3):
+        logs = tr.step()
+    assert np.isfinite(logs["eikonal"]) and np.isfinite(logs["smooth"]) and logs["smooth"] > 0
+    assert all(torch.isfinite(p.grad).all() for p in tr.sdf.parameters() if p.grad is not None)
+    with pytest.raises(ValueError, match="eikonal_ray_sample"):
+        _trainer(tiny_scene, eikonal_ray_sample="every").step()
