@@ -29,8 +29,8 @@ Where our port and the official code can differ, a config key chooses (default: 
 
 Nearby views of an instance: the ray through the instance's bounding-box centre in each view; a
 source must see the instance with an angle to the reference ray in (``min_angle``, ``max_angle``)
-degrees and a ray-ray distance below ``max_ray_dist`` (normalised units); the closest ``n_source``
-by ray distance are kept. Instances must appear in >= ``min_views`` views with > ``min_area_frac`` x
+degrees and a ray-ray distance below ``max_ray_dist`` (normalised units); ``n_source`` of them are used
+per step (``mask_source_choice``). Instances must appear in >= ``min_views`` views with > ``min_area_frac`` x
 H x W pixels.
 
 Diagnostics (:meth:`MaskConstraint.diagnostics`, averaged per step since the last call, in every snapshot's
@@ -38,8 +38,8 @@ diagnostics and so in every job result's curve and in the study): ``mask_untrust
 rays in the batch), ``mask_rays`` (rays counted, summed over source views), ``mask_instances`` (instances with
 a counted ray) of ``mask_instances_valid``, ``mask_wvalid_mean`` (mean ``sum_i w_i valid_i`` of the counted
 rays: well below 1 means the weight is spread along the ray or lands outside the source mask) and
-``mask_color_gap`` (mean reference - warped colour of the counted rays: > 0 means the warped colour is darker,
-which the L1 answers by pushing weight onto the samples that land in the mask).
+``mask_color_gap`` (mean reference - warped colour of the counted rays: > 0 means the warped colour is darker;
+measured as what makes the term hurt in docs/uncertainty.md).
 """
 
 from __future__ import annotations
@@ -108,7 +108,6 @@ class MaskConstraint:
         scene, views = trainer.scene, trainer.views
         V, H, W = instance_ids.shape
         self.H, self.W = H, W
-        self.ids = torch.from_numpy(instance_ids.astype(np.int64)).reshape(V, -1)
         self.members = torch.from_numpy(eroded_instances(instance_ids, erode)).reshape(V, -1)  # the rays each instance warps
         self.images = torch.from_numpy(np.ascontiguousarray(scene.images[views].transpose(0, 3, 1, 2)).astype(np.float32))
         self.ids_img = torch.from_numpy(instance_ids.astype(np.int64))

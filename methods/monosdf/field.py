@@ -207,11 +207,11 @@ class SDFNetwork(torch.nn.Module):
         feat = self.level_mask(feat)
         jac = None if jac is None else self.level_mask(jac)  # (P, 3, L * F): the same mask on the last axis
         pe = self.encode(xs)  # (P, 3 + 6 F_pe)
-        slopes = []
-        a = feat
-        for i, lin in enumerate(self.linears[:-1]):
-            z = linear_blocks([feat, pe], lin.weight, lin.bias) if i == 0 else lin(a)  # first layer: no (P, in) concatenation
-            a, slope = _softplus_and_slope(z, self.grid.fast)
+        first = self.linears[0]
+        a, slope = _softplus_and_slope(linear_blocks([feat, pe], first.weight, first.bias), self.grid.fast)  # no (P, in) concatenation
+        slopes = [slope]
+        for lin in self.linears[1:-1]:
+            a, slope = _softplus_and_slope(lin(a), self.grid.fast)
             slopes.append(slope)
         out = self.linears[-1](a)
         sdf_net = out[:, 0] * self.radius  # the MLP works in x / R units; the SDF in normalised units

@@ -110,35 +110,32 @@ def ssi_depth_fit_code(pred: torch.Tensor, target: torch.Tensor, weight: torch.T
     return loss, s.detach()
 
 
-def normal_loss_code(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """The official MonoInstance release's normal terms: ``mean(weight * l1)`` and ``mean(weight * (1 - cos))``
-    over ALL rays (the certainty scales the terms down instead of renormalising them as :func:`normal_loss`
-    does). pred, target: (R, 3); weight: (R,)."""
-    p = F.normalize(pred, dim=-1, eps=1e-8)
-    q = F.normalize(target, dim=-1, eps=1e-8)
-    return (weight * (p - q).abs().sum(-1)).mean(), (weight * (1.0 - (p * q).sum(-1))).mean()
-
-
 def ssi_depth_loss(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
     """:func:`ssi_depth_fit`'s loss with MonoSDF's behaviour (every fitted scale kept)."""
     return ssi_depth_fit(pred, target, weight)[0]
 
 
-def normal_loss(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+def normal_loss(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor, reduce: str = "weighted") -> tuple[torch.Tensor, torch.Tensor]:
     """MonoSDF's normal loss terms, per-ray weighted: (L1 of the difference summed over xyz, 1 - cos).
 
     Args:
         pred: (R, 3) rendered normals (any length; normalised here), camera frame.
         target: (R, 3) prior normals, camera frame (0 = invalid).
         weight: (R,) per-ray weights.
+        reduce: ``"weighted"``: sums over the valid rays / the sum of their weights (MonoSDF's mean when every
+            weight is 1); ``"rays"``: the MonoInstance release's ``mean(weight * term)`` over ALL rays (the
+            certainty scales the terms down instead of being renormalised; no validity mask).
 
     Returns:
-        (l1, angular) scalars (means over valid weighted rays).
+        (l1, angular) scalars.
     """
-    w = weight * (target.norm(dim=-1) > 0.5).to(weight.dtype)
     p = F.normalize(pred, dim=-1, eps=1e-8)
     q = F.normalize(target, dim=-1, eps=1e-8)
+    l1, ang = (p - q).abs().sum(-1), 1.0 - (p * q).sum(-1)
+    if reduce == "rays":
+        return (weight * l1).mean(), (weight * ang).mean()
+    if reduce != "weighted":
+        raise ValueError(f"reduce must be 'weighted' or 'rays', got {reduce!r}")
+    w = weight * (target.norm(dim=-1) > 0.5).to(weight.dtype)
     denom = w.sum().clamp_min(1.0)
-    l1 = (w * (p - q).abs().sum(-1)).sum() / denom
-    ang = (w * (1.0 - (p * q).sum(-1))).sum() / denom
-    return l1, ang
+    return (w * l1).sum() / denom, (w * ang).sum() / denom

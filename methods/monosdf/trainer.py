@@ -26,7 +26,7 @@ from bench.scene import Scene
 from methods.base import Snapshot
 from methods.monosdf.field import ColorNetwork, LaplaceDensity, SDFNetwork
 from methods.monosdf.grid import make_grid_spec
-from methods.monosdf.losses import color_loss, eikonal_loss, normal_loss, normal_loss_code, smoothness_loss, ssi_depth_fit, ssi_depth_fit_code
+from methods.monosdf.losses import color_loss, eikonal_loss, normal_loss, smoothness_loss, ssi_depth_fit, ssi_depth_fit_code
 from methods.monosdf.rays import build_rays, normalisation
 from methods.monosdf.render import RenderOutput, hierarchical_samples, render_depth, render_rays
 
@@ -191,7 +191,7 @@ class MonoSDFTrainer:
             terms["depth"] = (float(cfg["depth_weight"]) * self._warmup("depth_warmup"), loss)
             self._depth_scales.append(float(scale))  # prior units per normalised unit (exact metric prior: the scene scale)
         if self.prior_normal is not None and cfg["normal_weight"] > 0:
-            l1, ang = (normal_loss_code if code_form else normal_loss)(out.normal, self.prior_normal[view, pixels], w)
+            l1, ang = normal_loss(out.normal, self.prior_normal[view, pixels], w, reduce="rays" if code_form else "weighted")
             terms["normal_l1"] = (float(cfg["normal_weight"]), l1)
             terms["normal_cos"] = (float(cfg["normal_weight"]), ang)
         for extra in self.extra_losses:
@@ -280,7 +280,7 @@ class MonoSDFTrainer:
         if surf_in_extra:
             extra.append(surf)
         if mode == "all":  # the release: every ray sample and a jittered neighbour of each, no uniform points
-            extra = [uni[:0]]
+            extra = [torch.zeros(0, 3)]
             if smooth_w > 0:
                 samples = (origins[:, None, :] + dirs[:, None, :] * t[..., None]).reshape(-1, 3)
                 extra.append(samples + (torch.rand(samples.shape, generator=self.gen) - 0.5) * jit)
@@ -322,8 +322,8 @@ class MonoSDFTrainer:
         stats = {"samples_weighted": float((out.weights.detach() > WEIGHTED_SAMPLE).sum(-1).float().mean()),
                  "samples_rendered": out.kept / R}  # per ray, with gradients (n_coarse + n_fine unless pruned)
         total = abs(logs["loss"])
-        for k, (wt, v) in terms.items():  # each weighted term's share of the total loss
-            stats[f"share_{k}"] = wt * float(v.detach()) / total if total > 0 else 0.0
+        for k, (wt, _) in terms.items():  # each weighted term's share of the total loss
+            stats[f"share_{k}"] = wt * logs[k] / total if total > 0 else 0.0
         for k, v in {**logs, **stats}.items():
             self._log_sums[k] = self._log_sums.get(k, 0.0) + v
         self._log_count += 1

@@ -553,7 +553,7 @@ def test_code_form_of_the_prior_losses():
     """The MonoInstance release's depth loss: binary-mask fit over rays whose SDF changes sign, c-weighted
     residual / (2 x masked rays); 0 (finite, zero gradient) without masked rays or with all weights 0. Its
     normal terms are means over all rays of c x term."""
-    from methods.monosdf.losses import normal_loss_code, ssi_depth_fit_code
+    from methods.monosdf.losses import ssi_depth_fit_code
 
     torch.manual_seed(0)
     pred = (torch.rand(64) + 0.5).requires_grad_(True)
@@ -573,9 +573,9 @@ def test_code_form_of_the_prior_losses():
         zero.backward()
         assert float(zero) == 0.0 and torch.isfinite(p.grad).all()
     n = torch.nn.functional.normalize(torch.randn(64, 3), dim=-1)
-    l1, ang = normal_loss_code(n, n, w)
+    l1, ang = normal_loss(n, n, w, reduce="rays")
     assert float(l1) == pytest.approx(0.0, abs=1e-6) and float(ang) == pytest.approx(0.0, abs=1e-6)
-    l1, ang = normal_loss_code(n, -n, torch.ones(64))
+    l1, ang = normal_loss(n, -n, torch.ones(64), reduce="rays")
     assert float(ang) == pytest.approx(2.0, abs=1e-5)
 
 
