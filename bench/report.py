@@ -19,6 +19,10 @@ partly failed row is never silently averaged over fewer jobs.
 
 Claims: a claim compares means. For each comparison we also say whether the difference exceeds the
 combined spread ``std_a + std_b`` (a deliberately conservative test; unknown with one seed).
+
+Convergence: a spec with ``convergence`` judges every trained row (:mod:`bench.convergence`); the table
+shows the verdict per row, the tidy CSV has it in ``converged``, and a claim comparing a row that has not
+converged is ``UNDECIDED (not converged: ...)``: a row that has not converged is not a result.
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ import numpy as np
 import pandas as pd
 
 from bench.atomic import atomic_write_many, atomic_write_text
+from bench.convergence import RowConvergence, judge_row
 from bench.errors import BenchInputError
 from bench.tables import ClaimSpec, DatasetGroup, TableSpec, resolve
 
@@ -46,7 +51,7 @@ RESULT_COLUMNS = [
 ]
 TIDY_COLUMNS = [
     "table", "row", "group", "dataset", "metric", "source", "mean", "std", "n", "n_expected",
-    "n_failed", "n_pending", "unit", "status",
+    "n_failed", "n_pending", "unit", "status", "converged",
 ]
 TIME_COLUMNS = ["table", "row", "group", "quantity", "unit", "mean", "std", "n"]
 NOT_IMPLEMENTED = "pending (method not implemented yet)"
@@ -158,6 +163,12 @@ class TableReport:
     unavailable: set[str]
     n_unmatched: int = 0
     n_superseded: int = 0
+    convergence: dict[tuple[str, str], RowConvergence] = field(default_factory=dict)  # (row, group) -> verdict; empty without a spec
+
+    def not_converged(self, label: str, gid: str) -> bool:
+        """True if the row was judged in this group and has not converged."""
+        v = self.convergence.get((label, gid))
+        return v is not None and v.judged and not v.converged
 
 
 def _match_group(jobs: pd.DataFrame, spec: TableSpec, g: DatasetGroup) -> pd.Series:
@@ -286,7 +297,8 @@ def _timing(spec: TableSpec, jobs: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=TIME_COLUMNS)
 
 
-def _tidy(spec: TableSpec, cells: dict[tuple[str, str, str], Cell]) -> pd.DataFrame:
+def _tidy(spec: TableSpec, cells: dict[tuple[str, str, str], Cell],
+          convergence: Mapping[tuple[str, str], RowConvergence]) -> pd.DataFrame:
     out: list[dict[str, Any]] = []
     units = {(g.id, c.key): c.unit for g in spec.groups for c in g.columns}
     paper_units = {(g.id, c.key): c.published_unit for g in spec.groups for c in g.columns}
@@ -295,7 +307,7 @@ def _tidy(spec: TableSpec, cells: dict[tuple[str, str, str], Cell]) -> pd.DataFr
         out.append({"table": spec.name, "row": label, "group": gid, "dataset": dataset[gid], "metric": key,
                     "source": "ours", "mean": c.mean, "std": c.std, "n": c.n, "n_expected": c.n_expected,
                     "n_failed": c.n_failed, "n_pending": c.n_pending, "unit": units.get((gid, key), ""),
-                    "status": c.status})
+                    "status": c.status, "converged": _converged_value(convergence.get((label, gid)))})
     for r in spec.rows + spec.paper_only_rows:
         for gid, vals in (r.paper or {}).items():
             for key, v in vals.items():
@@ -303,9 +315,22 @@ def _tidy(spec: TableSpec, cells: dict[tuple[str, str, str], Cell]) -> pd.DataFr
                             "metric": key, "source": "paper", "mean": math.nan if v is None else v,
                             "std": math.nan, "n": None, "n_expected": None, "n_failed": None,
                             "n_pending": None, "unit": paper_units[(gid, key)],
-                            "status": "published" if v is not None else "not published"})
+                            "status": "published" if v is not None else "not published", "converged": None})
     tidy = pd.DataFrame(out, columns=TIDY_COLUMNS)
     return tidy.astype({k: "Int64" for k in ("n", "n_expected", "n_failed", "n_pending")})
+
+
+def _converged_value(v: RowConvergence | None) -> bool | None:
+    return None if v is None or not v.judged else v.converged
+
+
+def _judge_rows(spec: TableSpec, jobs: pd.DataFrame) -> dict[tuple[str, str], RowConvergence]:
+    if spec.convergence is None:
+        return {}
+    ok = jobs[jobs["status"] == "ok"]
+    return {(r.label, g.id): judge_row(ok[(ok["row"] == r.label) & (ok["gid"] == g.id)][["seed", "curve", "config"]]
+                                       .itertuples(index=False, name=None), spec.convergence)
+            for r in spec.rows for g in spec.groups}
 
 
 def build_table(spec: TableSpec, df: pd.DataFrame, scale: str,
@@ -327,8 +352,9 @@ def build_table(spec: TableSpec, df: pd.DataFrame, scale: str,
             sub = jobs[(jobs["row"] == r.label) & (jobs["gid"] == g.id)]
             for key in [c.key for c in g.columns if not c.paper_only] + list(g.extra_metrics):
                 cells[(r.label, g.id, key)] = _cell(sub, key, res.n_expected(g.id), r.method not in unavailable)
-    report = TableReport(spec, scale, cells, jobs, _tidy(spec, cells), _timing(spec, jobs), [], unavailable,
-                         n_unmatched, n_superseded)
+    convergence = _judge_rows(spec, jobs)
+    report = TableReport(spec, scale, cells, jobs, _tidy(spec, cells, convergence), _timing(spec, jobs), [], unavailable,
+                         n_unmatched, n_superseded, convergence)
     report.claims = [check_claim(report, c) for c in spec.claims]
     return report
 
@@ -398,8 +424,11 @@ def check_claim(report: TableReport, claim: ClaimSpec) -> ClaimResult:
             f"[{g}] {ra} {ma} = {_fmt(ca.mean)} ± {_fmt(ca.std)} (n={ca.n}, {ca.n_seeds} seeds) "
             f"{rel} {rb} {mb} = {_fmt(cb.mean)} ± {_fmt(cb.std)} (n={cb.n}, {cb.n_seeds} seeds): "
             f"{'yes' if ok else 'NO'}; {sp}")
+    unconverged = sorted({f"{r} [{g}]" for g, ra, _, rb, _, _, _ in pairs for r in (ra, rb) if report.not_converged(r, g)})
     if missing:
         verdict = f"UNDECIDED (missing rows: {'; '.join(missing)})"
+    elif unconverged:
+        verdict = f"UNDECIDED (not converged: {'; '.join(unconverged)}; as measured: {'HELD' if holds else 'NOT HELD'})"
     else:
         verdict = "HELD" if holds else "NOT HELD"
     paper_vals = [(_paper_value(spec, ra, g, ma), _paper_value(spec, rb, g, mb), better, strict)
@@ -442,6 +471,8 @@ def to_markdown(report: TableReport, heading_level: int = 2) -> str:
         prefix = f"{g.label} " if multi else ""
         headers += [f"{prefix}{c.label} {c.arrow}" + _unit_label(c) for c in g.columns]
         headers.append(f"{prefix}time [s]")
+        if spec.convergence:
+            headers.append(f"{prefix}converged")
     body: list[list[str]] = []
     for r in spec.rows:
         line = [f"**{r.label}**"]
@@ -449,7 +480,9 @@ def to_markdown(report: TableReport, heading_level: int = 2) -> str:
             for c in g.columns:
                 line.append("(paper only)" if c.paper_only else format_cell(report.cells[(r.label, g.id, c.key)], c.fmt))
             line.append(_mean_total(report, r.label, g.id))
-        if all(x in (NOT_IMPLEMENTED, "(paper only)", "") for x in line[1:]):
+            if spec.convergence:
+                line.append(report.convergence[(r.label, g.id)].label())
+        if all(x in (NOT_IMPLEMENTED, "(paper only)", "", "-") for x in line[1:]):
             line = [line[0], NOT_IMPLEMENTED + f": `{r.method}`"] + [""] * (len(line) - 2)
         body.append(line)
         if r.paper:
@@ -475,6 +508,8 @@ def to_markdown(report: TableReport, heading_level: int = 2) -> str:
         f"Rows in *italics marked paper* are the values published in the paper{f' ({spec.paper_table})' if spec.paper_table else ''}, "
         f"not measured here; '-' = not published. Time: mean total wall seconds per job.",
     ]
+    if spec.convergence:
+        parts += ["", _convergence_sentence(spec)]
     if spec.notes:
         parts += [""] + [f"- {n}" for n in spec.notes]
     parts += ["", f"{h}# Stage timings (mean wall seconds per job)", "", _timing_markdown(report)]
@@ -494,6 +529,17 @@ def to_markdown(report: TableReport, heading_level: int = 2) -> str:
     return "\n".join(parts) + "\n"
 
 
+def _convergence_sentence(spec: TableSpec) -> str:
+    cv = spec.convergence
+    assert cv is not None
+    worse = "below" if cv.higher_is_better else "above"
+    return (f"Converged (trained rows; `-` = no optimisation schedule): in every run {cv.metric} at the snapshot "
+            f"nearest 50 % of the schedule is within {cv.flat:g} of the final value, no snapshot after 25 % is more "
+            f"than {cv.drop:g} {worse} the one before, and the seed std of the final value is <= {cv.seed_std:g} "
+            f"(`bench/convergence.py`). A row that has not converged is not a result: a claim comparing it is "
+            f"UNDECIDED, with the verdict on the measured numbers in brackets.")
+
+
 def _unit_label(c: Any) -> str:
     if c.published_unit != c.unit:
         return f" [{c.unit or '-'}; paper: {c.published_unit or '-'}]"
@@ -508,6 +554,8 @@ def _paper_line(spec: TableSpec, label: str, paper: Any) -> list[str]:
             fmt = c.fmt if c.published_unit == c.unit else "g"  # another unit: as published
             line.append("" if vals is None or c.key not in vals else _num(vals[c.key], fmt))
         line.append("")
+        if spec.convergence:
+            line.append("")
     return line
 
 

@@ -31,6 +31,7 @@ import pandas as pd
 import yaml
 
 from bench.atomic import atomic_write_bytes, atomic_write_text
+from bench.convergence import ConvergenceSpec, check_run
 from bench.errors import BenchInputError
 
 @dataclasses.dataclass(frozen=True)
@@ -176,19 +177,13 @@ def _worker_init() -> None:
 
 
 def convergence_checks(curve: pd.DataFrame, flat_tol: float = 0.03, drop_tol: float = 0.05) -> dict[str, Any]:
-    """The issue tracker's convergence criteria on one run's F-score curve (sorted by fraction):
+    """The issue tracker's convergence criteria on one run's F-score curve (:mod:`bench.convergence`):
     ``flat``: |F(50 %) - F(100 %)| <= flat_tol (F at the snapshot nearest 50 %); ``no_drop``: no snapshot
     after 25 % is more than drop_tol below the one before."""
-    c = curve.sort_values("fraction")
-    f = c["fscore"].to_numpy(dtype=float) if "fscore" in c else np.full(len(c), np.nan)
-    fr = c["fraction"].to_numpy(dtype=float)
-    if not len(f) or not np.isfinite(f[-1]):
-        return {"flat": False, "no_drop": False, "f_half": math.nan, "max_drop": math.nan}
-    half = f[int(np.argmin(np.abs(fr - 0.5)))]
-    after = np.where(fr > 0.25 + 1e-9)[0]
-    drops = [f[i - 1] - f[i] for i in after if i > 0 and np.isfinite(f[i - 1]) and np.isfinite(f[i])]
-    max_drop = max([0.0, *drops])
-    return {"flat": bool(abs(half - f[-1]) <= flat_tol), "no_drop": bool(max_drop <= drop_tol), "f_half": float(half), "max_drop": float(max_drop)}
+    f = curve["fscore"] if "fscore" in curve else np.full(len(curve), np.nan)
+    c = check_run(curve["fraction"].to_numpy(dtype=float), np.asarray(f, dtype=float),
+                  ConvergenceSpec(metric="fscore", flat=flat_tol, drop=drop_tol))
+    return {"flat": c.flat, "no_drop": c.no_drop, "f_half": c.half, "max_drop": c.max_drop}
 
 
 def summarise(df: pd.DataFrame, key: str | None) -> str:

@@ -35,6 +35,8 @@ raise :class:`~bench.errors.BenchInputError` naming the file and the key). The s
     paper_only_rows:
       - {label: MonoSDF, paper: {scannet: {acc: 0.035}}}
     anchors: {object_mode: &object_mode {...}}  # optional, ignored: YAML anchors reused by rows
+    convergence:                        # optional: when a trained row counts as a result (bench.convergence)
+      {metric: fscore, flat: 0.03, drop: 0.05, seed_std: 0.03}   # flat / drop / seed_std optional (these defaults)
     claims:
       - {id: c1, text: "...", kind: monotone, group: scannet, metric: fscore,
          rows: [A, B, C], direction: increasing, strict: true}
@@ -43,7 +45,8 @@ raise :class:`~bench.errors.BenchInputError` naming the file and the key). The s
 
 ``group`` of a claim is one group id or a list of them (the claim must hold in each). ``better``
 takes its direction from the column (or from an explicit ``direction: higher|lower`` for extra
-metrics).
+metrics). With ``convergence``, every trained row is judged by those criteria, and a claim that
+compares a row that has not converged is UNDECIDED (its comparison on the measured numbers is still shown).
 """
 
 from __future__ import annotations
@@ -56,6 +59,7 @@ from typing import Any, Literal, Mapping
 
 import yaml
 
+from bench.convergence import ConvergenceSpec
 from bench.errors import BenchInputError
 from bench.scene import DATASET_FORMATS
 
@@ -162,6 +166,7 @@ class TableSpec:
     notes: tuple[str, ...] = ()
     main_metric_key: str | None = None
     path: str = ""
+    convergence: ConvergenceSpec | None = None
 
     @property
     def scales(self) -> tuple[str, ...]:
@@ -459,6 +464,16 @@ def _margin(ctx: _Ctx, value: Any, key: str) -> float:
     return float(value)
 
 
+def _convergence(ctx: _Ctx, obj: Any, key: str, groups: tuple[DatasetGroup, ...]) -> ConvergenceSpec:
+    d = ctx.mapping(obj, key, {"metric"}, {"flat", "drop", "seed_std"})
+    metric = ctx.string(d["metric"], f"{key}.metric")
+    col = next((c for g in groups for c in g.columns if c.key == metric and not c.paper_only), None)
+    if col is None:
+        raise ctx.fail(f"{key}.metric", f"{metric!r} is not a measured column of any group")
+    tol = {k: _margin(ctx, d[k], f"{key}.{k}") for k in ("flat", "drop", "seed_std") if k in d}
+    return ConvergenceSpec(metric=metric, higher_is_better=col.direction == "higher", **tol)
+
+
 # --------------------------------------------------------------------------------------------------
 # public API
 
@@ -468,7 +483,7 @@ def parse_table_spec(obj: Any, where: str | Path = "<table spec>") -> TableSpec:
     ctx = _Ctx(where)
     d = ctx.mapping(
         obj, "", {"name", "title", "datasets", "seeds", "rows"},
-        {"paper_table", "paper_only_rows", "claims", "notes", "main_metric", "anchors"},
+        {"paper_table", "paper_only_rows", "claims", "notes", "main_metric", "anchors", "convergence"},
     )
     name = ctx.string(d["name"], "name", pattern=True)
     if isinstance(where, Path) and where.suffix in (".yaml", ".yml") and where.stem != name:
@@ -511,6 +526,7 @@ def parse_table_spec(obj: Any, where: str | Path = "<table spec>") -> TableSpec:
         ctx.string(main, "main_metric")
         if not any(c.key == main and not c.paper_only for g in groups for c in g.columns):
             raise ctx.fail("main_metric", f"{main!r} is not a measured column of any group")
+    convergence = _convergence(ctx, d["convergence"], "convergence", groups) if d.get("convergence") is not None else None
     return TableSpec(
         name=name,
         title=ctx.string(d["title"], "title"),
@@ -523,6 +539,7 @@ def parse_table_spec(obj: Any, where: str | Path = "<table spec>") -> TableSpec:
         notes=ctx.strlist(notes, "notes") if notes else (),
         main_metric_key=main,
         path=str(where),
+        convergence=convergence,
     )
 
 
