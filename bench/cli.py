@@ -25,29 +25,13 @@ import argparse
 import sys
 from pathlib import Path
 
-from bench.errors import BenchInputError
+from bench.data.errors import BenchInputError
 
 EXIT_JOBS_FAILED = 1
 REPO_ROOT = Path(__file__).resolve().parent.parent
-TABLES_DIR = REPO_ROOT / "configs" / "tables"
 SCENES_DIR = REPO_ROOT / "configs" / "scenes"
 DEFAULT_OUT = REPO_ROOT / "results" / "runs"
 REFERENCE_DIR = REPO_ROOT / "results" / "reference"
-
-
-def _table_path(name: str) -> Path:
-    """A shipped table by name (``configs/tables/<name>.yaml``) or a user's own table spec by path (``*.yaml``)."""
-    if name.endswith((".yaml", ".yml")):
-        own = Path(name)
-        if not own.is_file():
-            raise BenchInputError(own, "table spec file does not exist")
-        return own
-    path = TABLES_DIR / f"{name}.yaml"
-    if not path.exists():
-        from bench.tables import list_tables
-
-        raise BenchInputError(path, f"no table {name!r} (known: {list_tables(TABLES_DIR)})")
-    return path
 
 
 def table_status(spec, available: set[str]) -> str:
@@ -70,7 +54,7 @@ def table_status(spec, available: set[str]) -> str:
 
 
 def cmd_list(args: argparse.Namespace) -> int:
-    from bench.tables import list_tables, load_table_spec
+    from bench.pipeline import load_tables
     from methods.registry import available_methods
 
     print("methods:")
@@ -78,12 +62,11 @@ def cmd_list(args: argparse.Namespace) -> int:
         print(f"  {m}")
     print("tables:")
     avail = set(available_methods())
-    for t in list_tables(TABLES_DIR):
-        spec = load_table_spec(TABLES_DIR / f"{t}.yaml")
+    for spec in load_tables(["all"], Path(args.tables_dir)):
         status = table_status(spec, avail)
-        print(f"  {t:10s} {spec.title}  [{status}]")
+        print(f"  {spec.name:10s} {spec.title}  [{status}]")
     print("scenes:")
-    from bench.synth.recipe import load_recipe
+    from bench.data.synth.recipe import load_recipe
 
     for p in sorted(SCENES_DIR.glob("*.yaml")):
         r = load_recipe(p)
@@ -92,7 +75,7 @@ def cmd_list(args: argparse.Namespace) -> int:
 
 
 def cmd_scenes_make(args: argparse.Namespace) -> int:
-    from bench.synth.make import make_dataset
+    from bench.data.synth.make import make_dataset
 
     recipe = Path(args.recipe)
     if not recipe.exists() and (SCENES_DIR / f"{args.recipe}.yaml").exists():
@@ -107,43 +90,21 @@ def _print_table_summary(md_path: Path) -> None:
     print(md_path.read_text())
 
 
-def select_plans(spec, plans: list, rows: list[str] | None, scenes: list[str] | None, seeds: list[int] | None) -> list:
-    """Restrict a table's job plans to some row labels / scenes, or replace its seeds (CLI filters)."""
-    from dataclasses import replace
-
-    if rows:
-        unknown = set(rows) - {r.label for r in spec.rows}
-        if unknown:
-            raise BenchInputError(spec.path or spec.name, f"no row(s) {sorted(unknown)} (rows: {[r.label for r in spec.rows]})")
-        plans = [p for p in plans if p.row in rows]
-    if scenes:
-        unknown = set(scenes) - {p.scene for p in plans}
-        if unknown:
-            raise BenchInputError(spec.path or spec.name, f"no scene(s) {sorted(unknown)} in this table "
-                                  f"(scenes: {sorted({p.scene for p in plans})})")
-        plans = [p for p in plans if p.scene in scenes]
-    if seeds:
-        plans = [replace(p, seed=s) for p in {(p.row, p.group, p.scene): p for p in plans}.values() for s in seeds]
-    return plans
-
-
 def cmd_run(args: argparse.Namespace) -> int:
     """Plan every named table, run the union of their jobs once (a job several tables share, same id,
     runs once and counts in each), then write each table's outputs; with several tables also one
     ``report.md`` assembling them."""
+    from bench.pipeline import load_tables, plan_table
     from bench.report import build_table, collect_results, render_report, write_table_outputs
-    from bench.runner import plan_index, resolve_jobs, run_jobs, unique_jobs
-    from bench.tables import list_tables, load_table_spec, plan_jobs
+    from bench.runner import plan_index, run_jobs, unique_jobs
     from methods.registry import available_methods
 
-    names = list_tables(TABLES_DIR) if args.table == ["all"] else args.table
     out = Path(args.out) / args.scale
     specs, jobs_by_table = [], {}
     threads = _planned_threads(args)
-    for name in names:
-        spec = load_table_spec(_table_path(name))
-        plans = select_plans(spec, plan_jobs(spec, args.scale), args.rows, args.scenes, args.seeds)
-        jobs, pending = resolve_jobs(plans, threads)
+    for spec in load_tables(args.table, Path(args.tables_dir)):
+        planned = plan_table(spec, args.scale, args.rows, args.scenes, args.seeds, threads)
+        jobs, pending = planned.jobs, planned.pending
         pending_methods = sorted({p.method for p in pending})
         print(f"table {spec.name}: {len(jobs)} jobs at scale {args.scale!r}"
               + (f"; pending (not implemented yet): {', '.join(pending_methods)}" if pending_methods else ""))
@@ -225,6 +186,13 @@ def _executor(args: argparse.Namespace):
     return make_executor(args.executor, workers=_workers(args), scheduler=args.scheduler, retries=args.retries)
 
 
+def _add_tables_dir(p: argparse.ArgumentParser) -> None:
+    from bench.pipeline import SHIPPED_TABLES
+
+    p.add_argument("--tables-dir", default=str(SHIPPED_TABLES), metavar="DIR",
+                   help="where table names resolve (default: the shipped configs/tables/)")
+
+
 def _add_executor_flags(p: argparse.ArgumentParser) -> None:
     from bench.executors import DEFAULT_RETRIES, EXECUTORS
 
@@ -243,19 +211,19 @@ def _add_executor_flags(p: argparse.ArgumentParser) -> None:
 def cmd_regress(args: argparse.Namespace) -> int:
     from bench.regress import run_regress
 
-    return run_regress(args)
+    with _executor(args) as executor:
+        return run_regress(args, executor, Path(args.tables_dir))
 
 
 def cmd_report(args: argparse.Namespace) -> int:
+    from bench.pipeline import load_tables, plan_table
     from bench.report import collect_results, render_report
-    from bench.runner import plan_index, resolve_jobs
-    from bench.tables import list_tables, load_table_spec, plan_jobs
+    from bench.runner import plan_index
     from methods.registry import available_methods
 
     out = Path(args.out) / args.scale
-    names = args.table or list_tables(TABLES_DIR)
-    specs = [load_table_spec(_table_path(n)) for n in names]
-    plans = {s.name: plan_index(resolve_jobs(plan_jobs(s, args.scale))[0]) for s in specs}
+    specs = load_tables(args.table or ["all"], Path(args.tables_dir))
+    plans = {s.name: plan_index(plan_table(s, args.scale).jobs) for s in specs}
     path = render_report(specs, collect_results(out), args.scale, out, available_methods(), plans=plans)
     print(f"wrote {path}")
     return 0
@@ -272,7 +240,7 @@ def cmd_study_convergence(args: argparse.Namespace) -> int:
 
 
 def cmd_scenes_downsize(args: argparse.Namespace) -> int:
-    from bench.formats.downsize import downsize_folder
+    from bench.data.formats.downsize import downsize_folder
 
     small = downsize_folder(Path(args.src), Path(args.dst), int(args.factor), overwrite=args.overwrite)
     print(f"wrote {args.dst} ({small.source_format}, {small.num_views} views {small.width}x{small.height})")
@@ -291,12 +259,14 @@ def cmd_fit(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from bench.synth.recipe import SCALES
+    from bench.data.synth.recipe import SCALES
 
     p = argparse.ArgumentParser(prog="bench", description="MonoInstance reference benchmark harness (CPU, small scenes).")
     sub = p.add_subparsers(dest="command", required=True)
 
-    sub.add_parser("list", help="list methods, tables and scenes").set_defaults(func=cmd_list)
+    lst = sub.add_parser("list", help="list methods, tables and scenes")
+    _add_tables_dir(lst)
+    lst.set_defaults(func=cmd_list)
 
     scenes = sub.add_parser("scenes", help="scene datasets").add_subparsers(dest="scenes_command", required=True)
     make = scenes.add_parser("make", help="synthesise a recipe into a dataset folder in its on-disk format")
@@ -325,6 +295,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--no-artifacts", action="store_true",
                      help="do not keep each job's mesh / uncertainty maps / renders under OUT/SCALE/artifacts/")
     _add_executor_flags(run)
+    _add_tables_dir(run)
     run.set_defaults(func=cmd_run)
 
     reg = sub.add_parser("regress", help="compare a fresh run with the stored reference results; non-zero exit on regression")
@@ -341,12 +312,14 @@ def build_parser() -> argparse.ArgumentParser:
                           "e.g. to store a reference from a finished run)")
     reg.add_argument("--quiet", action="store_true", help="no progress bars")
     _add_executor_flags(reg)
+    _add_tables_dir(reg)
     reg.set_defaults(func=cmd_regress)
 
     rep = sub.add_parser("report", help="rebuild tables and one report.md from stored results")
     rep.add_argument("--table", nargs="+", default=None)
     rep.add_argument("--scale", default="small", choices=SCALES)
     rep.add_argument("--out", default=str(DEFAULT_OUT))
+    _add_tables_dir(rep)
     rep.set_defaults(func=cmd_report)
 
     fit = sub.add_parser("fit", help="one method on your own dataset folder (any of the four formats); metrics where GT is present")

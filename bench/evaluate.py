@@ -14,8 +14,8 @@ from typing import Any, Callable
 import numpy as np
 import yaml
 
-from bench.errors import BenchInputError
-from bench.scene import Scene
+from bench.data.errors import BenchInputError
+from bench.data.scene import Scene
 from methods.base import Snapshot
 
 PROTOCOLS_FILE = Path(__file__).resolve().parent.parent / "configs" / "protocols.yaml"
@@ -139,7 +139,7 @@ def dtu_setup(scene: Scene, params: dict[str, Any], seed: int) -> dict[str, Any]
         raise BenchInputError(PROTOCOLS_FILE, f"dtu.cull must be 'none' or 'monosdf', got {cull!r}")
     cull_masks = None
     if cull == "monosdf":
-        from bench.formats.dtu import object_masks
+        from bench.data.formats.dtu import object_masks
         from metrics.mask_cull import dilate_masks, dilation_radius
 
         cull_masks = dilate_masks(object_masks(scene), dilation_radius(scene.width))

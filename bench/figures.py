@@ -24,17 +24,10 @@ from typing import Any
 
 import numpy as np
 
+from metrics.camera import backproject
+
 VMAX_M = 0.10  # colour scale of the distance to GT (m): the F-score threshold is 5 cm
 GEOMETRY_PROTOCOLS = ("scannet", "replica", "dtu")
-
-
-def _backproject(depth: np.ndarray, K: np.ndarray, c2w: np.ndarray) -> np.ndarray:
-    """(H, W) z-depth (m) -> (H, W, 3) world points (OpenCV camera, pixel centres at integers)."""
-    h, w = depth.shape
-    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
-    rays = np.stack([u, v, np.ones_like(u)], -1) @ np.linalg.inv(K).T
-    cam = rays * depth[..., None]
-    return cam @ c2w[:3, :3].T + c2w[:3, 3]
 
 
 def _raycasting_scene(mesh: Any) -> Any:
@@ -53,7 +46,7 @@ def distance_image(mesh: Any, gt_scene: Any, K: np.ndarray, c2w: np.ndarray, h: 
     from metrics.culling import render_depth_maps
 
     depth = render_depth_maps(mesh, K[None], c2w[None], h, w)[0]
-    pts = _backproject(depth, K, c2w)
+    pts = backproject(depth, K, c2w)
     d = gt_scene.compute_distance(o3d.core.Tensor(pts.reshape(-1, 3).astype(np.float32))).numpy().reshape(h, w)
     return np.where(depth > 0, d, np.nan)
 
@@ -82,7 +75,7 @@ def reconstruction_figure(report: Any, out_dir: Path, cache_dir: Path | None = N
     import matplotlib.pyplot as plt
     import trimesh
 
-    from bench.datasets import DEFAULT_CACHE, load_dataset
+    from bench.data.datasets import DEFAULT_CACHE, load_dataset
 
     panels = [(g.label, scene_name, rows) for g, scene_name, _seed, rows in _first_jobs(report, out_dir, "mesh.ply", GEOMETRY_PROTOCOLS)]
     if not panels:
@@ -197,7 +190,7 @@ def grid_png(cells: list[list[tuple[np.ndarray, str, dict[str, Any]]]], ylabels:
 
 def uncertainty_figure(report: Any, out_dir: Path, cache_dir: Path | None = None) -> bytes | None:
     """PNG: image / estimated uncertainty / true prior error for 3 views of every row with kept maps."""
-    from bench.datasets import DEFAULT_CACHE, load_dataset
+    from bench.data.datasets import DEFAULT_CACHE, load_dataset
 
     cells, labels = [], []
     for g, scene_name, _seed, rows in _first_jobs(report, out_dir, "uncertainty.npy"):
@@ -220,7 +213,7 @@ def uncertainty_figure(report: Any, out_dir: Path, cache_dir: Path | None = None
 
 def renders_figure(report: Any, out_dir: Path, cache_dir: Path | None = None) -> bytes | None:
     """PNG: 2 test views of every view-synthesis row: render, GT image, rendered depth, GT depth."""
-    from bench.datasets import DEFAULT_CACHE, load_dataset
+    from bench.data.datasets import DEFAULT_CACHE, load_dataset
 
     cells, labels = [], []
     for g, scene_name, _seed, rows in _first_jobs(report, out_dir, "renders.npy", ("llff",)):

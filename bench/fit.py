@@ -1,6 +1,6 @@
 """``bench fit METHOD PATH``: one method on any dataset folder in the four formats (a user's own data).
 
-The folder is loaded with :func:`bench.formats.load_scene` (format detected from its files; LLFF at
+The folder is loaded with :func:`bench.data.formats.load_scene` (format detected from its files; LLFF at
 ``--factor``), the method trained with its config at ``--scale`` plus ``--set`` overrides, and every
 snapshot evaluated with the format's protocol where the folder holds the ground truth it needs
 (``gt_mesh.ply`` for the geometry protocols; the held-out views for LLFF). Without it the run still
@@ -17,8 +17,8 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
-from bench.atomic import atomic_write_json, atomic_write_text
-from bench.errors import BenchInputError
+from bench.data.atomic import atomic_write_json, atomic_write_text
+from bench.data.errors import BenchInputError
 
 
 def fit_folder(method: str, path: Path, scale: str, overrides: dict[str, Any], out: Path, seed: int = 0,
@@ -30,7 +30,7 @@ def fit_folder(method: str, path: Path, scale: str, overrides: dict[str, Any], o
     """
     from bench.artifacts import write_job_artifacts
     from bench.evaluate import evaluate_snapshot
-    from bench.formats import detect_format, load_scene
+    from bench.data.formats import detect_format, load_scene
     from methods.registry import get_method, method_config
 
     path = Path(path)

@@ -44,8 +44,11 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Iterable, Literal
 
-from bench.atomic import atomic_write_json, atomic_write_text
-from bench.errors import BenchInputError
+from bench.data.atomic import atomic_write_json, atomic_write_text
+from bench.data.errors import BenchInputError
+from bench.executors.base import Executor
+from bench.jobs import versions
+from bench.pipeline import SHIPPED_TABLES, load_tables, plan_table
 from bench.tables import TableSpec
 
 REFERENCE_SCHEMA = 1
@@ -244,58 +247,55 @@ def load_reference(path: Path) -> dict[str, Any]:
     return d
 
 
-def run_regress(args: argparse.Namespace) -> int:
-    """``bench regress``: fresh run(s), comparison or reference update, report; returns the exit code."""
-    from bench.cli import TABLES_DIR, _executor, _table_path, select_plans
+def run_regress(args: argparse.Namespace, executor: Executor, tables_dir: Path = SHIPPED_TABLES) -> int:
+    """``bench regress``: fresh run(s) on ``executor``, comparison or reference update, report; returns
+    the exit code. ``args``: the CLI's (``table``, ``scale``, ``out``, ``reference_dir``, ...)."""
     from bench.report import build_table, collect_results, write_table_outputs
-    from bench.runner import _versions, plan_index, resolve_jobs, run_jobs
-    from bench.tables import list_tables, load_table_spec, plan_jobs
+    from bench.runner import plan_index, run_jobs
     from methods.registry import available_methods
 
-    names = list_tables(TABLES_DIR) if args.table == ["all"] else args.table
-    specs = [load_table_spec(_table_path(n)) for n in names]
+    specs = load_tables(args.table, tables_dir)
     out = Path(args.out) / args.scale
     failed_tables: list[str] = []
-    with _executor(args) as executor:
-        for spec in specs:
-            ref_path = reference_path(args.reference_dir, args.scale, spec.name)
-            reference = load_reference(ref_path) if ref_path.exists() else None
-            if reference is None and not args.update_reference:
-                print(f"table {spec.name}: no reference yet at {ref_path} (create it with --update-reference); skipped")
-                continue
-            rows = getattr(args, "rows", None)
-            source = getattr(args, "from_results", None)
-            jobs, pending = resolve_jobs(select_plans(spec, plan_jobs(spec, args.scale), rows, None, None),
-                                         None if source is not None else executor.planned_threads)
-            if source is not None:  # no fresh run: the stored results of an earlier `bench run` (same ids)
-                df = collect_results(Path(source) / args.scale)
-                print(f"table {spec.name}: {len(jobs)} jobs read from {Path(source) / args.scale} (no fresh run)")
-            else:
-                print(f"table {spec.name}: fresh run of {len(jobs)} jobs at scale {args.scale!r} on {executor.describe()}")
-                run_jobs(jobs, out, force=True, show_progress=not args.quiet, executor=executor)
-                df = collect_results(out)
-            df = df[df["base_id"].isin({j.base_id for j in jobs})]
-            report = build_table(spec, df, args.scale, available_methods(), plans=plan_index(jobs))
-            write_table_outputs(report, out)
-            if args.update_reference:
-                doc = make_reference(spec, report, _versions(), rows=rows)
-                atomic_write_json(ref_path, doc)
-                print(f"table {spec.name}: stored the reference {ref_path}")
-                if reference is not None:
-                    findings = compare(reference, summarise(spec, report, rows))
-                    changed = [f for f in findings if f.verdict not in ("ok",)]
-                    print(f"  (against the previous reference: {len(changed)} cell(s) changed beyond tolerance or new)")
-                continue
-            pending_rows = sorted({p.row for p in pending} | ({r.label for r in spec.rows} - set(rows) if rows else set()))
-            result = RegressResult(spec.name, args.scale, compare(reference, summarise(spec, report, rows), pending_rows))
-            md = to_markdown(result)
-            atomic_write_text(out / f"regress_{spec.name}.md", md)
-            atomic_write_json(out / f"regress_{spec.name}.json",
-                              {"table": spec.name, "scale": args.scale, "passed": result.passed,
-                               "reference": str(ref_path), "findings": [asdict(f) for f in result.findings]})
-            print(md)
-            if not result.passed:
-                failed_tables.append(spec.name)
+    for spec in specs:
+        ref_path = reference_path(args.reference_dir, args.scale, spec.name)
+        reference = load_reference(ref_path) if ref_path.exists() else None
+        if reference is None and not args.update_reference:
+            print(f"table {spec.name}: no reference yet at {ref_path} (create it with --update-reference); skipped")
+            continue
+        rows = getattr(args, "rows", None)
+        source = getattr(args, "from_results", None)
+        planned = plan_table(spec, args.scale, rows, threads=None if source is not None else executor.planned_threads)
+        jobs, pending = planned.jobs, planned.pending
+        if source is not None:  # no fresh run: the stored results of an earlier `bench run` (same ids)
+            df = collect_results(Path(source) / args.scale)
+            print(f"table {spec.name}: {len(jobs)} jobs read from {Path(source) / args.scale} (no fresh run)")
+        else:
+            print(f"table {spec.name}: fresh run of {len(jobs)} jobs at scale {args.scale!r} on {executor.describe()}")
+            run_jobs(jobs, out, force=True, show_progress=not args.quiet, executor=executor)
+            df = collect_results(out)
+        df = df[df["base_id"].isin({j.base_id for j in jobs})]
+        report = build_table(spec, df, args.scale, available_methods(), plans=plan_index(jobs))
+        write_table_outputs(report, out)
+        if args.update_reference:
+            doc = make_reference(spec, report, versions(), rows=rows)
+            atomic_write_json(ref_path, doc)
+            print(f"table {spec.name}: stored the reference {ref_path}")
+            if reference is not None:
+                findings = compare(reference, summarise(spec, report, rows))
+                changed = [f for f in findings if f.verdict not in ("ok",)]
+                print(f"  (against the previous reference: {len(changed)} cell(s) changed beyond tolerance or new)")
+            continue
+        pending_rows = sorted({p.row for p in pending} | ({r.label for r in spec.rows} - set(rows) if rows else set()))
+        result = RegressResult(spec.name, args.scale, compare(reference, summarise(spec, report, rows), pending_rows))
+        md = to_markdown(result)
+        atomic_write_text(out / f"regress_{spec.name}.md", md)
+        atomic_write_json(out / f"regress_{spec.name}.json",
+                          {"table": spec.name, "scale": args.scale, "passed": result.passed,
+                           "reference": str(ref_path), "findings": [asdict(f) for f in result.findings]})
+        print(md)
+        if not result.passed:
+            failed_tables.append(spec.name)
     if failed_tables:
         print(f"REGRESSION in {', '.join(failed_tables)} (reports in {out})")
         return 1

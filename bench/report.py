@@ -37,13 +37,12 @@ from typing import Any, Iterable, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from bench.atomic import atomic_write_many, atomic_write_text
+from bench.data.atomic import atomic_write_many, atomic_write_text
 from bench.convergence import RowConvergence, judge_row
-from bench.errors import BenchInputError
+from bench.data.errors import BenchInputError
+from bench.jobs import REQUIRED_FIELDS, RESULT_SCHEMA
 from bench.tables import ClaimSpec, DatasetGroup, TableSpec, resolve
 
-RESULT_SCHEMA = 1
-_REQUIRED = ("job_id", "table", "row", "method", "scene", "dataset", "seed", "scale", "status")
 RESULT_COLUMNS = [
     "job_id", "base_id", "table", "row", "method", "group", "dataset", "scene", "seed", "scale", "status",
     "error_type", "error_message", "metrics", "timings", "iterations", "curve", "config", "created",
@@ -68,7 +67,7 @@ def _read_job(path: Path) -> dict[str, Any]:
         raise BenchInputError(path, f"corrupt result JSON: {e}") from None
     if not isinstance(d, dict):
         raise BenchInputError(path, f"expected a JSON object, got {type(d).__name__}")
-    missing = [k for k in _REQUIRED if k not in d]
+    missing = [k for k in REQUIRED_FIELDS if k not in d]
     if missing:
         raise BenchInputError(path, f"missing key(s) {missing}")
     if d.get("schema", RESULT_SCHEMA) != RESULT_SCHEMA:

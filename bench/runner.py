@@ -8,64 +8,28 @@ raises is recorded as ``status: failed`` with its error and traceback, never sil
 
 Where jobs run is an executor's business (``bench/executors/``: a local process pool by default, Dask
 distributed for clusters); :func:`run_jobs` hands it the jobs still to do and writes each row as it
-arrives. Besides the schema-1 fields of :func:`run_job`, rows from :func:`run_jobs` carry
+arrives. Besides the schema-1 fields of :func:`bench.execute.run_job` (:mod:`bench.jobs`), rows from :func:`run_jobs` carry
 ``attempts`` (1 unless a worker died), ``wall_seconds`` (on the worker, dataset preparation included),
 ``worker_name``, ``executor`` and ``torch_threads``.
 """
 
 from __future__ import annotations
 
-import datetime as _dt
 import hashlib
 import json
-import math
-import os
-import platform
-import socket
 import sys
 import time
-import traceback
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
 from bench import __version__
-from bench.atomic import atomic_write_json
-from bench.datasets import DEFAULT_CACHE, load_dataset, scene_hash
-from bench.evaluate import evaluate_snapshot
-from bench.tables import JobPlan
-from methods.registry import available_methods, get_method, method_config
+from bench.data.atomic import atomic_write_json
+from bench.data.datasets import DEFAULT_CACHE, scene_hash
+from bench.jobs import WORKER_LOST, Job, JobPlan, result_path
+from methods.registry import available_methods, method_config
 
 if TYPE_CHECKING:
     from bench.executors.base import Executor
-
-RESULT_SCHEMA = 1
-
-
-@dataclass(frozen=True)
-class Job:
-    """A planned job with its resolved config and id."""
-
-    plan: JobPlan
-    config: dict[str, Any]
-    job_id: str
-    artifact_root: str | None = None  # write the job's mesh / maps under <root>/<job_id>/ (not part of the id)
-    base_id: str = ""  # the id without the thread count: what tables match results by ("" = job_id)
-
-    def __post_init__(self) -> None:
-        if not self.base_id:
-            object.__setattr__(self, "base_id", self.job_id)  # frozen dataclass
-
-
-def method_metrics(extra: dict[str, Any]) -> dict[str, float]:
-    """Metrics a method reports about itself (``unc_*``: quality of its uncertainty maps against the
-    scene's GT, from the uncertainty stage), copied from ``Artifacts.extra`` into the row's metrics so
-    tables can show them and claims can use them."""
-    out = {}
-    for k, v in extra.items():
-        if k.startswith("unc_") and isinstance(v, (int, float)) and math.isfinite(float(v)):
-            out[k] = float(v)
-    return out
 
 
 def job_id_for(plan: JobPlan, config: dict[str, Any], threads: int | None = None) -> str:
@@ -128,100 +92,10 @@ def training_first(jobs: list[Job]) -> list[Job]:
     return sorted(jobs, key=lambda j: 0 if j.config.get("iterations") else 1)
 
 
-def result_path(out_dir: Path, job: Job) -> Path:
-    return Path(out_dir) / "jobs" / f"{job.job_id}.json"
-
-
-def _versions() -> dict[str, str]:
-    import numpy
-    import open3d
-    import torch
-
-    return {"bench": __version__, "python": platform.python_version(), "numpy": numpy.__version__, "torch": torch.__version__, "open3d": open3d.__version__}
-
-
-def row_head(job: Job) -> dict[str, Any]:
-    """The identifying fields every result row starts with (the JSON schema, version 1)."""
-    plan = job.plan
-    return {
-        "job_id": job.job_id,
-        "base_id": job.base_id,
-        "schema": RESULT_SCHEMA,
-        "table": plan.table,
-        "row": plan.row,
-        "group": plan.group,
-        "method": plan.method,
-        "config": job.config,
-        "scene": plan.scene,
-        "dataset": plan.dataset,
-        "protocol": plan.protocol,
-        "effects": {k: dict(v) for k, v in plan.effects.items()},
-        "seed": plan.seed,
-        "scale": plan.scale,
-        "versions": _versions(),
-        "worker": f"{socket.gethostname()}:{os.getpid()}",
-        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-    }
-
-
-def failure_row(job: Job, error_type: str, message: str, tb: str) -> dict[str, Any]:
-    """A ``failed`` result row (same schema as :func:`run_job`'s) for an error outside the job's code."""
-    row = row_head(job)
-    row.update(status="failed", metrics={}, curve=[], iterations=0, timings={},
-               error={"type": error_type, "message": message, "traceback": tb})
-    return row
-
-
-def run_job(job: Job, cache_dir: Path = DEFAULT_CACHE, progress: Callable[[float, str], None] | None = None) -> dict[str, Any]:
-    """Run one job end to end (data, method, evaluation of every snapshot) and return its result row."""
-    plan = job.plan
-    row = row_head(job)
-    timings: dict[str, float] = {}
-    t_start = time.perf_counter()
-    try:
-        t = time.perf_counter()
-        scene = load_dataset(plan.scene, plan.scale, cache_dir, effects=plan.effects)
-        timings["data"] = time.perf_counter() - t
-
-        method = get_method(plan.method)
-        artifacts = method.fit(scene, job.config, plan.seed, progress)
-        for stage, seconds in artifacts.timings.items():
-            if stage != "total_method":
-                timings[stage] = float(seconds)
-
-        curve = []
-        t = time.perf_counter()
-        for i, snap in enumerate(artifacts.snapshots):
-            point = {"fraction": snap.fraction, "iterations": snap.iterations, "seconds": snap.seconds}
-            if snap.diagnostics:
-                point["diagnostics"] = dict(snap.diagnostics)
-            try:
-                point["metrics"] = evaluate_snapshot(snap, scene, plan.protocol, plan.scale, seed=plan.seed)
-            except ValueError as exc:  # e.g. an empty mesh early in the schedule: that point has no metrics
-                if i == len(artifacts.snapshots) - 1:
-                    raise  # the final result itself cannot be evaluated: the job fails, with this message
-                point.update(metrics={}, error=f"{type(exc).__name__}: {exc}")
-            curve.append(point)
-        timings["eval"] = (time.perf_counter() - t) / max(len(artifacts.snapshots), 1)
-        final = dict(curve[-1]["metrics"]) if curve else {}
-        final.update(method_metrics(artifacts.extra))
-        row.update(status="ok", error=None, metrics=final, curve=curve, iterations=artifacts.iterations, extra=artifacts.extra)
-        if job.artifact_root:
-            row["artifacts"] = _keep_artifacts(artifacts, scene, job)
-    except Exception as exc:  # recorded in the row: the table marks it failed instead of dropping it
-        row.update(status="failed", metrics={}, curve=[], iterations=0,
-                   error={"type": type(exc).__name__, "message": str(exc), "traceback": traceback.format_exc()})
-    timings["total"] = time.perf_counter() - t_start
-    row["timings"] = timings
-    return row
-
-
 def needs_run(path: Path, force: bool = False) -> bool:
     """True if the job stored at ``path`` must (re)run: ``force``, no stored row, or a stored failure
     whose worker died (``WorkerLost``: not the job's fault, so a rerun tries again). A job that raised
     keeps its failed row until ``force`` (it would fail again)."""
-    from bench.executors.base import WORKER_LOST
-
     if force or not path.exists():
         return True
     try:
@@ -341,18 +215,6 @@ def run_jobs(
             row = json.loads(path.read_text())
         rows.append(row)
     return rows
-
-
-def _keep_artifacts(artifacts: Any, scene: Any, job: Job) -> dict[str, Any]:
-    """Write the job's artifacts (bench.artifacts); a failure to write them is noted, not fatal."""
-    from bench.artifacts import artifact_dir, write_job_artifacts
-
-    assert job.artifact_root is not None
-    folder = artifact_dir(Path(job.artifact_root), job.job_id)
-    try:
-        return {"dir": f"artifacts/{job.job_id}", "files": write_job_artifacts(artifacts, scene, folder)}
-    except OSError as exc:
-        return {"dir": None, "files": [], "error": f"{type(exc).__name__}: {exc}"}
 
 
 def _describe(job: Job | None) -> str:

@@ -17,7 +17,6 @@ from __future__ import annotations
 import dataclasses
 import io
 import json
-import math
 import multiprocessing as mp
 import os
 import sys
@@ -30,9 +29,9 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from bench.atomic import atomic_write_bytes, atomic_write_text
+from bench.data.atomic import atomic_write_bytes, atomic_write_text
 from bench.convergence import ConvergenceSpec, check_run
-from bench.errors import BenchInputError
+from bench.data.errors import BenchInputError
 
 @dataclasses.dataclass(frozen=True)
 class StudyRun:
@@ -96,8 +95,8 @@ def parse_sweep(text: str | None) -> tuple[str | None, list[Any]]:
 def load_study_scene(scene: str, scale: str, exact_priors: bool) -> Any:
     """The scene of a study: a recipe name (synthesised and cached) or a dataset folder; with
     ``exact_priors`` its mono depth / normals are replaced by GT depth / GT normals (camera frame)."""
-    from bench.datasets import load_dataset
-    from bench.formats import load_scene
+    from bench.data.datasets import load_dataset
+    from bench.data.formats import load_scene
 
     sc = load_scene(Path(scene)) if Path(scene).is_dir() else load_dataset(scene, scale)
     if exact_priors:

@@ -3,7 +3,7 @@ paper's tables, the paper's published values, and the paper's claims to check.
 
 A spec is a YAML file in ``configs/tables/``; :func:`load_table_spec` parses it strictly (unknown keys,
 unknown directions, claims naming rows or metrics that do not exist, scales missing from a group all
-raise :class:`~bench.errors.BenchInputError` naming the file and the key). The schema::
+raise :class:`~bench.data.errors.BenchInputError` naming the file and the key). The schema::
 
     name: ablation                      # must equal the file stem
     title: "Table 4: ..."
@@ -60,8 +60,9 @@ from typing import Any, Literal, Mapping
 import yaml
 
 from bench.convergence import ConvergenceSpec
-from bench.errors import BenchInputError
-from bench.scene import DATASET_FORMATS
+from bench.data.errors import BenchInputError
+from bench.jobs import JobPlan
+from bench.data.scene import DATASET_FORMATS
 
 Direction = Literal["lower", "higher"]
 ClaimKind = Literal["monotone", "greater", "better"]
@@ -197,23 +198,6 @@ class TableSpec:
             if c.direction == "higher":
                 return g, c
         return measured[0]
-
-
-@dataclass(frozen=True)
-class JobPlan:
-    """One expected job of a table at a scale: a row on one scene with one seed."""
-
-    table: str
-    row: str
-    method: str
-    overrides: Mapping[str, Any]
-    group: str
-    dataset: str
-    protocol: str
-    scene: str
-    seed: int
-    scale: str
-    effects: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

@@ -20,7 +20,7 @@ import numpy as np
 import trimesh
 import trimesh.remesh
 
-from bench.datasets import load_dataset
+from bench.data.datasets import load_dataset
 from bench.evaluate import evaluate_snapshot
 from methods.base import Snapshot
 

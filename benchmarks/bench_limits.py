@@ -58,7 +58,7 @@ def grid_flops(points: int, levels: int, features: int, with_jacobian: bool) -> 
 def main() -> None:
     from torch.utils.flop_counter import FlopCounterMode
 
-    from bench.datasets import load_dataset
+    from bench.data.datasets import load_dataset
     from bench.study import parse_overrides
     from methods.monosdf.trainer import WEIGHTED_SAMPLE, MonoSDFTrainer
     from methods.registry import method_config

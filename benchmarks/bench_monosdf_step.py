@@ -25,7 +25,7 @@ import time
 
 import torch
 
-from bench.datasets import load_dataset
+from bench.data.datasets import load_dataset
 from methods.monosdf.trainer import MonoSDFTrainer
 from methods.registry import method_config
 

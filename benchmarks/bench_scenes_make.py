@@ -14,7 +14,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from bench.synth.make import make_dataset
+from bench.data.synth.make import make_dataset
 
 SCENES = Path(__file__).resolve().parent.parent / "configs" / "scenes"
 PRESETS = ["scannet_like_0", "replica_like_0", "dtu_like_0", "llff_like_0"]

@@ -19,7 +19,7 @@ import time
 
 import yaml
 
-from bench.datasets import load_dataset
+from bench.data.datasets import load_dataset
 from methods.monoinstance import run_uncertainty_stage
 
 

@@ -1,6 +1,6 @@
 """The interface between the harness and a method: ``Method.fit(scene, config, seed) -> Artifacts``.
 
-A method sees only a :class:`bench.scene.Scene` (never a file format) and its resolved config dict. It
+A method sees only a :class:`bench.data.scene.Scene` (never a file format) and its resolved config dict. It
 returns snapshots taken along its schedule (e.g. at 25 / 50 / 100 % of its iterations) so the harness
 can show what accuracy costs in time, plus wall seconds per stage.
 """

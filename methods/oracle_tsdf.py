@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from bench.errors import BenchInputError
-from bench.scene import Scene
+from bench.data.errors import BenchInputError
+from bench.data.scene import Scene
 from methods.base import Artifacts, ProgressFn, Snapshot
 from methods.registry import register
 from metrics.culling import MONOSDF_BLOCK_M, block_resolution_for, tsdf_refuse

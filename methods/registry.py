@@ -8,11 +8,9 @@ from typing import Any, Callable
 
 import yaml
 
-from bench.errors import BenchInputError
+from bench.data.errors import BenchInputError
 
 _REGISTRY: dict[str, type] = {}
-_BUILTIN_MODULES = ("methods.oracle_tsdf", "methods.monosdf.method", "methods.monoinstance.method",
-                    "methods.gaussians.methods")
 CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs" / "methods"
 
 
@@ -34,8 +32,20 @@ _PLUGIN_CONFIGS: dict[str, Path] = {}
 _plugins_loaded = False
 
 
+def builtin_modules() -> list[str]:
+    """The modules of the ``methods`` package that declare a method (a line starting with
+    ``@register(``), found by reading the sources: adding a method needs no list kept by hand, and
+    modules that declare none (networks, losses, kernels) are not imported for it."""
+    root = Path(__file__).resolve().parent
+    found = []
+    for path in sorted(root.rglob("*.py")):
+        if path.name != "registry.py" and any(line.lstrip().startswith("@register(") for line in path.read_text().splitlines()):
+            found.append(".".join(("methods", *path.relative_to(root).with_suffix("").parts)))
+    return found
+
+
 def _load_builtins() -> None:
-    for mod in _BUILTIN_MODULES:
+    for mod in builtin_modules():
         importlib.import_module(mod)
     _load_plugins()
 

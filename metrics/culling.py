@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from metrics._checks import as_cameras, as_points, check_positive, to_numpy
+from metrics.camera import backproject_pixels, pixel_rays
 from metrics.mesh import clean_mesh
 
 
@@ -245,11 +246,9 @@ def render_depth_maps(mesh: Any, K: Any, cam_to_world: Any, H: int, W: int) -> n
     scene.add_triangles(
         o3d.core.Tensor(np.nan_to_num(v, nan=0.0).astype(np.float32)), o3d.core.Tensor(f.astype(np.uint32))
     )
-    uu, vv = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
-    pix = np.stack([uu, vv, np.ones_like(uu)], -1).reshape(-1, 3)  # [HW, 3]
     out = np.zeros((c2w.shape[0], h, w), dtype=np.float32)
     for i in range(c2w.shape[0]):
-        d_cam = pix @ np.linalg.inv(Km[i]).T  # z = 1
+        d_cam = pixel_rays(Km[i], h, w).reshape(-1, 3)  # z = 1
         d_world = d_cam @ c2w[i, :3, :3].T
         o = np.broadcast_to(c2w[i, :3, 3], d_world.shape)
         rays = np.concatenate([o, d_world], 1).astype(np.float32)
@@ -273,9 +272,7 @@ def _touched_block_keys(depth: np.ndarray, K: np.ndarray, c2w: np.ndarray, depth
     vv, uu = np.nonzero((depth > 0) & (depth <= depth_trunc))
     if vv.size == 0:
         return np.zeros(0, dtype=np.int64)
-    z = depth[vv, uu].astype(np.float64)
-    pc = np.stack([uu, vv, np.ones_like(uu)], 1).astype(np.float64) @ np.linalg.inv(K).T * z[:, None]
-    pw = pc @ c2w[:3, :3].T + c2w[:3, 3]
+    pw = backproject_pixels(depth, vv, uu, K, c2w)
     lo = np.floor((pw - trunc) / block_size).astype(np.int64)
     hi = np.floor((pw + trunc) / block_size).astype(np.int64)
     return np.unique(np.concatenate([_block_key(np.where(bx, hi[:, 0], lo[:, 0]), np.where(by, hi[:, 1], lo[:, 1]), np.where(bz, hi[:, 2], lo[:, 2]))

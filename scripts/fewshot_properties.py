@@ -36,7 +36,7 @@ import numpy as np
 
 def coverage_of_test_views(scene) -> tuple[float, float]:
     """(fraction of test pixels seen by < 2 training views, median max disparity in px) from GT depth."""
-    from bench.scene import backproject_depth
+    from metrics.camera import backproject
 
     train, test = scene.view_indices("train"), scene.view_indices("test")
     H, W = scene.height, scene.width
@@ -45,7 +45,7 @@ def coverage_of_test_views(scene) -> tuple[float, float]:
     for t in test:
         valid = scene.gt_depth[t] > 0
         pix = np.stack([uu[valid], vv[valid]], 0).astype(np.float64)
-        world = backproject_depth(scene.gt_depth[t], scene.intrinsics[t], scene.cam_to_world[t])[valid].T  # (3, M)
+        world = backproject(scene.gt_depth[t], scene.intrinsics[t], scene.cam_to_world[t])[valid].T  # (3, M)
         count = np.zeros(valid.sum(), dtype=int)
         max_disp = np.zeros(valid.sum())
         for v in train:
@@ -105,7 +105,7 @@ def _rows_from_table(root: Path, scale: str, method: str, name: str, scene, unse
 def main() -> None:
     import pandas as pd
 
-    from bench.datasets import load_dataset
+    from bench.data.datasets import load_dataset
     from bench.evaluate import evaluate_snapshot
     from bench.study import parse_overrides
     from methods.registry import get_method, method_config

@@ -26,8 +26,8 @@ def main() -> None:
     import pandas as pd
     import trimesh
 
-    from bench.datasets import load_dataset
-    from bench.formats import load_scene
+    from bench.data.datasets import load_dataset
+    from bench.data.formats import load_scene
     from metrics.culling import render_depth_maps
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)

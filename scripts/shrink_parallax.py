@@ -20,21 +20,12 @@ from pathlib import Path
 import numpy as np
 
 
-def project(points: np.ndarray, K: np.ndarray, cam_to_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pixel coordinates (P, 2) and z-depth (P,) of world points (P, 3) in one OpenCV camera: the metrics
-    library's projection (metrics.culling, the one its frustum and visibility tests use), one chunk."""
-    from metrics.culling import _project
-
-    _, u, v, z = next(_project(points, K[None], cam_to_world[None], chunk=max(len(points), 1)))
-    return np.stack([u[0], v[0]], axis=-1), z[0]
-
-
 def main() -> None:
     import pandas as pd
 
-    from bench.datasets import load_dataset
-    from bench.formats import load_scene
-    from bench.scene import backproject_depth
+    from bench.data.datasets import load_dataset
+    from bench.data.formats import load_scene
+    from metrics.camera import backproject, project
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("scenes", nargs="+")
@@ -57,13 +48,15 @@ def main() -> None:
             per_class: dict[str, list[np.ndarray]] = {"walls + ceiling (textureless)": [], "floor + objects (textured)": []}
             for v in views[:: args.ref_stride]:
                 valid = (scene.gt_depth[v] > 0).reshape(-1)
-                X = backproject_depth(scene.gt_depth[v], scene.intrinsics[v], scene.cam_to_world[v]).reshape(-1, 3)[valid]
+                X = backproject(scene.gt_depth[v], scene.intrinsics[v], scene.cam_to_world[v]).reshape(-1, 3)[valid]
                 cls = np.isin(scene.gt_instance[v].reshape(-1)[valid], list(background))
                 shrunk = c0 + k * (X - c0)
                 for j in views[:: args.other_stride]:
-                    a, z = project(X, scene.intrinsics[j], scene.cam_to_world[j])
-                    b, _ = project(shrunk, scene.intrinsics[j], scene.cam_to_world[j])
-                    inside = (z > 0.1) & (a[:, 0] >= 0) & (a[:, 0] < scene.width) & (a[:, 1] >= 0) & (a[:, 1] < scene.height)
+                    ua, va, z = project(X, scene.intrinsics[j], scene.cam_to_world[j])
+                    ub, vb, _ = project(shrunk, scene.intrinsics[j], scene.cam_to_world[j])
+                    a, b = np.stack([ua, va], axis=-1), np.stack([ub, vb], axis=-1)
+                    with np.errstate(invalid="ignore"):
+                        inside = (z > 0.1) & (ua >= 0) & (ua < scene.width) & (va >= 0) & (va < scene.height)
                     d = np.linalg.norm(a - b, axis=1)
                     per_class["walls + ceiling (textureless)"].append(d[inside & cls])
                     per_class["floor + objects (textured)"].append(d[inside & ~cls])

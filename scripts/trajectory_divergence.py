@@ -21,7 +21,7 @@ import torch
 
 
 def main() -> None:
-    from bench.datasets import load_dataset
+    from bench.data.datasets import load_dataset
     from bench.study import parse_overrides
     from methods.monosdf.trainer import MonoSDFTrainer
     from methods.registry import method_config

@@ -11,7 +11,7 @@ lost, and a rerun skips it. Contract of :meth:`Executor.run`:
 * a worker that dies mid-job (process killed, out of memory, machine lost) gets the job retried on
   another worker, at most ``retries`` more times; then the ``done`` row is a failure of type
   ``WorkerLost`` naming the attempts and the last error (:func:`lost_row`);
-* a job that raises is not retried: :func:`bench.runner.run_job` records its error and traceback in
+* a job that raises is not retried: :func:`bench.execute.run_job` records its error and traceback in
   the row (deterministic failures would only fail again);
 * ``started`` / ``retry`` / ``status`` events feed the progress display (jobs done / running / failed).
 
@@ -36,15 +36,13 @@ import traceback
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Iterator, Literal, Sequence
+from typing import Any, Callable, Iterator, Literal, Sequence
 
-if TYPE_CHECKING:  # the runner imports torch / open3d: keep this module light for worker start-up
-    from bench.runner import Job
+from bench.jobs import WORKER_LOST, Job, failure_row
 
 EventKind = Literal["started", "retry", "done", "status"]
 ProgressFactory = Callable[["Job"], Callable[[float, str], None] | None]
 DEFAULT_RETRIES = 2
-WORKER_LOST = "WorkerLost"
 
 
 @dataclass(frozen=True)
@@ -162,7 +160,7 @@ def prepare_dataset(scene: str, scale: str, cache_dir: Path, effects: Any = None
     waits and then finds the first one's folder. Without a working lock, the loser of the race gets
     ``FileExistsError`` from ``atomic_directory``; it then uses the winner's folder.
     """
-    from bench.datasets import ensure_dataset, is_folder_scene
+    from bench.data.datasets import ensure_dataset, is_folder_scene
 
     if is_folder_scene(scene):  # a user's dataset folder: nothing to synthesise
         return
@@ -198,7 +196,7 @@ def execute_job(job: "Job", cache_dir: Path | None, attempt: int = 1, threads: i
     """
     t0 = time.perf_counter()
     if cache_dir is None:
-        from bench.datasets import DEFAULT_CACHE
+        from bench.data.datasets import DEFAULT_CACHE
 
         cache_dir = DEFAULT_CACHE
     name, kind = _worker_identity()
@@ -215,7 +213,7 @@ def execute_job(job: "Job", cache_dir: Path | None, attempt: int = 1, threads: i
         threads = threads_per_job(slots)
     set_job_threads(threads)
 
-    from bench.runner import failure_row, run_job
+    from bench.execute import run_job  # imports torch / open3d: keep this module light for worker start-up
 
     try:
         prepare_dataset(job.plan.scene, job.plan.scale, cache_dir, job.plan.effects)
@@ -230,8 +228,6 @@ def execute_job(job: "Job", cache_dir: Path | None, attempt: int = 1, threads: i
 
 def lost_row(job: "Job", attempts: int, message: str, executor: str, detail: str = "") -> dict[str, Any]:
     """The failure row of a job whose worker died ``attempts`` times (retries exhausted)."""
-    from bench.runner import failure_row
-
     text = f"the worker running this job died {attempts} time(s) (retries exhausted): {message}"
     row = failure_row(job, WORKER_LOST, text, detail or text)
     row.update(attempts=attempts, wall_seconds=None, worker_name=None, executor=executor, torch_threads=None,

@@ -36,7 +36,7 @@ from bench.executors.base import DEFAULT_RETRIES, Event, Executor, ProgressFacto
 if TYPE_CHECKING:
     from distributed import Client, Future
 
-    from bench.runner import Job
+    from bench.jobs import Job
 
 
 @dataclass
@@ -123,8 +123,8 @@ class DaskExecutor(Executor):
         from distributed import wait
         from distributed.scheduler import KilledWorker
 
-        from bench.datasets import DEFAULT_CACHE
-        from bench.runner import failure_row
+        from bench.data.datasets import DEFAULT_CACHE
+        from bench.jobs import failure_row
 
         if not jobs:
             return

@@ -21,16 +21,15 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Iterator, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 from bench.executors.lifeline import FORKSERVER_PRELOAD, exit_with_parent, mark_parent
 from bench.executors.base import DEFAULT_RETRIES, Event, Executor, ProgressFactory, execute_job, lost_row, set_job_threads, threads_per_job
 
-if TYPE_CHECKING:
-    from bench.runner import Job
+from bench.jobs import Job
 
 START_METHOD = "forkserver"
-PRELOAD = [*FORKSERVER_PRELOAD, "bench.runner"]  # imported once by the fork server (torch, open3d, ...): workers start in ms;
+PRELOAD = [*FORKSERVER_PRELOAD, "bench.execute"]  # imported once by the fork server (torch, open3d, ...): workers start in ms;
 # the lifeline first: the fork server dies with bench (bench.executors.lifeline)
 
 
@@ -111,7 +110,7 @@ class LocalExecutor(Executor):
                     elif isinstance(exc, BrokenProcessPool):
                         victims.append((job, attempt))
                     else:  # execute_job does not raise for a job's own errors: this is e.g. unpicklable output
-                        from bench.runner import failure_row
+                        from bench.jobs import failure_row
 
                         row = failure_row(job, type(exc).__name__, str(exc), f"{type(exc).__name__}: {exc}")
                         row.update(attempts=attempt, executor="local")

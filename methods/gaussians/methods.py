@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from bench.scene import Scene
+from bench.data.scene import Scene
 from methods.base import Artifacts, ProgressFn
 from methods.registry import register
 

@@ -40,6 +40,7 @@ import torch
 import torch.nn.functional as F
 
 from methods.gaussians.rasterize import rasterize_gaussians
+from metrics.camera import pixel_rays, pixels_to_rays, to_world
 
 SH_C0 = 0.28209479177387814
 SH_C1 = 0.4886025119029199
@@ -107,11 +108,9 @@ def init_points_from_views(images: np.ndarray, Ks: np.ndarray, c2ws: np.ndarray,
     feats = [_patch_features(imgs[i]) for i in range(V)]
     inv_d = torch.linspace(1.0 / far, 1.0 / near, n_depths, dtype=torch.float64)
     depths = 1.0 / inv_d
-    vs, us = torch.meshgrid(torch.arange(H, dtype=torch.float64), torch.arange(W, dtype=torch.float64), indexing="ij")
-    pix = torch.stack([us.flatten(), vs.flatten(), torch.ones(H * W, dtype=torch.float64)], -1)  # [HW, 3]
     pts_all, col_all = [], []
     for i in range(V):
-        rays = pix @ torch.linalg.inv(torch.from_numpy(Ks[i])).T  # z = 1
+        rays = torch.from_numpy(pixel_rays(Ks[i], H, W).reshape(-1, 3))  # [HW, 3], z = 1
         c2w = torch.from_numpy(c2ws[i])
         ref = _centre(feats[i].reshape(27, -1).T.float(), cost)  # [HW, 27]
         total = torch.zeros(n_depths, H * W)
@@ -158,8 +157,7 @@ def init_points_from_views(images: np.ndarray, Ks: np.ndarray, c2ws: np.ndarray,
         rp, rc = [], []
         for i in range(V):
             m = views == i
-            rays = np.stack([uu[m], vv[m], np.ones(m.sum())], -1) @ np.linalg.inv(Ks[i]).T
-            rp.append((rays * dd[m, None]) @ c2ws[i][:3, :3].T + c2ws[i][:3, 3])
+            rp.append(to_world(pixels_to_rays(Ks[i], uu[m], vv[m]) * dd[m, None], c2ws[i]))
             ui = np.clip(np.round(uu[m]).astype(int), 0, W - 1)
             vi = np.clip(np.round(vv[m]).astype(int), 0, H - 1)
             rc.append(images[i][vi, ui])

@@ -1,6 +1,6 @@
 """Differentiable 3D Gaussian rasteriser for the CPU, in pure PyTorch (the fast path).
 
-Conventions (as everywhere in the project, see ``bench/scene.py``): ``viewmat`` is the (4, 4)
+Conventions (as everywhere in the project, see ``bench/data/scene.py``): ``viewmat`` is the (4, 4)
 WORLD-TO-CAMERA matrix with OpenCV axes (x right, y down, z forward), world units metres; ``K`` is the
 (3, 3) pinhole matrix in pixels with pixel centres at integer coordinates, so pixel (row v, column u)
 is the image point (u, v). Depth outputs are z-depth.

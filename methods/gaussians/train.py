@@ -28,7 +28,7 @@ from typing import Any, Callable
 import numpy as np
 import torch
 
-from bench.scene import Scene
+from bench.data.scene import Scene
 from methods.base import Artifacts, Snapshot
 from methods.gaussians import losses
 from methods.gaussians.model import init_params, init_points_from_views, render

@@ -3,7 +3,7 @@
 Pipeline (docs/uncertainty.md): per-view alignment of the mono depth prior to a reference depth
 (:func:`align_mono_depth`), multi-view consistent instances (:func:`associate_instances`), and the
 density-based uncertainty U = 1 - c (:func:`estimate_uncertainty`); :func:`run_uncertainty_stage` runs
-all three on a :class:`bench.scene.Scene`. Defaults: ``configs/methods/monoinstance_uncertainty.yaml``.
+all three on a :class:`bench.data.scene.Scene`. Defaults: ``configs/methods/monoinstance_uncertainty.yaml``.
 """
 
 from methods.monoinstance.alignment import align_mono_depth, align_mono_depth_status

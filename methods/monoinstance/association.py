@@ -43,6 +43,8 @@ from typing import Any
 
 import numpy as np
 
+from metrics.camera import backproject_pixels
+
 ASSOC_DEFAULTS: dict[str, Any] = {
     "assoc_min_pixels": 20,
     "assoc_max_points": 128,
@@ -87,18 +89,6 @@ class Association:
             "n_clusters": float(self.n_clusters),
             "n_same_view_splits": float(self.n_same_view_splits),
         }
-
-
-def backproject_pixels(depth: np.ndarray, rows: np.ndarray, cols: np.ndarray, K: np.ndarray, c2w: np.ndarray) -> np.ndarray:
-    """World points (P, 3) float64 of pixels (rows, cols) of one view at z-depth ``depth[rows, cols]``.
-
-    Pixel centres at integer coordinates, OpenCV camera axes, ``x_world = R (z K^-1 [u, v, 1]) + t``.
-    """
-    z = depth[rows, cols].astype(np.float64)
-    kinv = np.linalg.inv(K)
-    pix = np.stack([cols.astype(np.float64), rows.astype(np.float64), np.ones(rows.size)], axis=1)
-    cam = (pix @ kinv.T) * (z / (pix @ kinv.T)[:, 2])[:, None]
-    return cam @ c2w[:3, :3].T + c2w[:3, 3]
 
 
 def _strided(pts: np.ndarray, k: int) -> np.ndarray:

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from bench.scene import Scene
+from bench.data.scene import Scene
 from methods.base import Artifacts, ProgressFn
 from methods.monoinstance.mask_constraint import MaskConstraint
 from methods.monoinstance.sampling import GuidedSampler

@@ -7,7 +7,7 @@
 3. density-based uncertainty per instance (:mod:`.uncertainty`);
 4. if the scene has GT (``gt_depth``, ``gt_instance``), quality figures (:func:`stage_quality`).
 
-It depends only on the :class:`bench.scene.Scene` and a reference depth (whatever rendered it: an SDF,
+It depends only on the :class:`bench.data.scene.Scene` and a reference depth (whatever rendered it: an SDF,
 Gaussians, or GT in tests). Config: ``configs/methods/monoinstance_uncertainty.yaml`` (defaults);
 ``config`` overrides them; unknown keys are an error.
 """
@@ -117,7 +117,7 @@ def run_uncertainty_stage(
     """Alignment -> multi-view association -> density uncertainty (module docstring).
 
     Args:
-        scene: :class:`bench.scene.Scene` with ``mono_depth``, ``seg_masks``, ``seg_background``.
+        scene: :class:`bench.data.scene.Scene` with ``mono_depth``, ``seg_masks``, ``seg_background``.
         ref_depth: (N, H, W) reference z-depth in metres (stage-1 render; GT in tests), or
             (N, H/f, W/f) rendered at 1/f resolution. 0 = invalid.
         config: overrides of ``configs/methods/monoinstance_uncertainty.yaml``.
@@ -134,7 +134,7 @@ def run_uncertainty_stage(
     cfg = resolve_stage_config(config)
     if scene.mono_depth is None or scene.seg_masks is None or scene.seg_background is None:
         raise ValueError(f"scene {scene.name!r} needs mono_depth, seg_masks and seg_background for the uncertainty stage")
-    n, h, w = scene.num_views, scene.height, scene.width
+    n = scene.num_views
     ref = np.asarray(ref_depth, dtype=np.float32)
     if ref.ndim != 3 or ref.shape[0] != n:
         raise ValueError(f"ref_depth must be ({n}, H, W) or ({n}, H/f, W/f), got {ref.shape}")
@@ -241,14 +241,14 @@ def stage_quality(res: UncertaintyResult, scene) -> dict[str, float]:
 
 def save_uncertainty_maps(result: UncertaintyResult, out_dir: str | Path, montage: bool = True) -> list[Path]:
     """Write ``uncertainty_{i:04d}.png`` (8-bit grey, round(255 U)) per view and, optionally,
-    ``uncertainty_montage.png`` (views tiled, inferno colour map), each atomically (bench.atomic).
+    ``uncertainty_montage.png`` (views tiled, inferno colour map), each atomically (bench.data.atomic).
 
     Returns:
         the written paths.
     """
     from PIL import Image
 
-    from bench.atomic import atomic_write_bytes
+    from bench.data.atomic import atomic_write_bytes
 
     out = Path(out_dir)
     U = np.clip(np.nan_to_num(np.asarray(result.uncertainty, dtype=np.float64)), 0.0, 1.0)

@@ -43,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from methods.monoinstance.association import backproject_pixels
+from metrics.camera import backproject_pixels
 
 UNCERTAINTY_DEFAULTS: dict[str, Any] = {
     "n_subsample": 20000,

@@ -9,7 +9,7 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from bench.scene import Scene
+from bench.data.scene import Scene
 from methods.base import Artifacts, ProgressFn
 from methods.monosdf.trainer import MonoSDFTrainer, train_with_snapshots
 from methods.registry import register

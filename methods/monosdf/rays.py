@@ -12,8 +12,9 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from bench.errors import BenchInputError
-from bench.scene import Scene, pixel_rays_camera
+from bench.data.errors import BenchInputError
+from bench.data.scene import Scene
+from metrics.camera import pixel_rays
 
 
 @dataclass
@@ -54,7 +55,7 @@ def build_rays(scene: Scene, views: np.ndarray, radius: float) -> RayBundle:
     origins, dirs, zf, far, rots = [], [], [], [], []
     for v in views:
         K, c2w = scene.intrinsics[v], scene.cam_to_world[v]
-        d_cam = pixel_rays_camera(K, scene.height, scene.width).reshape(-1, 3)  # z = 1
+        d_cam = pixel_rays(K, scene.height, scene.width).reshape(-1, 3)  # z = 1
         norm = np.linalg.norm(d_cam, axis=1)
         d_world = (d_cam / norm[:, None]) @ c2w[:3, :3].T
         o = (c2w[:3, 3] - centre) / scale

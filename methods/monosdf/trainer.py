@@ -22,7 +22,7 @@ import numpy as np
 import torch
 import trimesh
 
-from bench.scene import Scene
+from bench.data.scene import Scene
 from methods.base import Snapshot
 from methods.monosdf.field import ColorNetwork, LaplaceDensity, SDFNetwork
 from methods.monosdf.grid import make_grid_spec
@@ -462,7 +462,7 @@ class MonoSDFTrainer:
         """Write a checkpoint atomically."""
         import io
 
-        from bench.atomic import atomic_write_bytes
+        from bench.data.atomic import atomic_write_bytes
 
         buf = io.BytesIO()
         torch.save(self.state_dict(), buf)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from bench.scene import InstanceInfo, Scene
+from bench.data.scene import InstanceInfo, Scene
 
 N, H, W = 5, 24, 32
 

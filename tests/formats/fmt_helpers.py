@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.formats import write_scene
-from bench.scene import Scene
+from bench.data.formats import write_scene
+from bench.data.scene import Scene
 
 FORMATS = ("scannet", "replica", "dtu", "llff")
 

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from bench.errors import BenchInputError
-from bench.formats import detect_format, load_scene, write_scene
-from bench.formats.npz import load_npz, save_npz
+from bench.data.errors import BenchInputError
+from bench.data.formats import detect_format, load_scene, write_scene
+from bench.data.formats.npz import load_npz, save_npz
 
 from fmt_helpers import write
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from bench.errors import BenchInputError
-from bench.formats.cameras import (
+from bench.data.errors import BenchInputError
+from bench.data.formats.cameras import (
     compose_world_mat,
     decompose_projection,
     decompose_world_mat,

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from bench.cli import main
-from bench.formats import load_scene
-from bench.formats.downsize import downsize_depth, downsize_ids, downsize_intrinsics, downsize_normal, downsize_rgb
+from bench.data.formats import load_scene
+from bench.data.formats.downsize import downsize_depth, downsize_ids, downsize_intrinsics, downsize_normal, downsize_rgb
 
 from fmt_helpers import FORMATS, write
 

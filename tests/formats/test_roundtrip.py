@@ -7,8 +7,8 @@ import pytest
 import trimesh
 from PIL import Image
 
-from bench.formats import detect_format, load_scene
-from bench.formats.llff import scale_intrinsics, resize_nearest
+from bench.data.formats import detect_format, load_scene
+from bench.data.formats.llff import scale_intrinsics, resize_nearest
 
 from fmt_helpers import FORMATS, quantised, strip_extras, write
 
@@ -50,7 +50,7 @@ def test_roundtrip(tmp_path, scene, gt_mesh, fmt):
 
 
 def test_dtu_object_mask(tmp_path, scene):
-    from bench.formats.dtu import load_object_masks
+    from bench.data.formats.dtu import load_object_masks
 
     root = write(scene, tmp_path / "dtu", "dtu")
     masks = load_object_masks(root)

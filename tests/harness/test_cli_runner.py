@@ -10,8 +10,9 @@ import pytest
 from bench.executors.local import LocalExecutor
 
 from bench.cli import main
-from bench.runner import Job, job_id_for, plan_index, resolve_jobs, run_jobs
-from bench.tables import JobPlan, load_table_spec, plan_jobs
+from bench.jobs import Job, JobPlan
+from bench.runner import job_id_for, plan_index, resolve_jobs, run_jobs
+from bench.tables import load_table_spec, plan_jobs
 from methods.registry import available_methods, method_config
 
 REPO = Path(__file__).resolve().parents[2]
@@ -87,9 +88,9 @@ def test_failed_job_is_recorded_not_dropped(tmp_path):
 def test_unevaluable_snapshot(tmp_path, monkeypatch, bad):
     """An early snapshot that cannot be evaluated (e.g. an empty mesh) is a curve point without metrics;
     the final one failing fails the job, with the evaluator's message."""
-    import bench.runner as runner
+    import bench.execute as execute
 
-    real, calls = runner.evaluate_snapshot, []
+    real, calls = execute.evaluate_snapshot, []
 
     def flaky(snap, *a, **k):
         calls.append(snap.fraction)
@@ -97,7 +98,7 @@ def test_unevaluable_snapshot(tmp_path, monkeypatch, bad):
             raise ValueError("pred_mesh is empty")
         return real(snap, *a, **k)
 
-    monkeypatch.setattr(runner, "evaluate_snapshot", flaky)
+    monkeypatch.setattr(execute, "evaluate_snapshot", flaky)
     plan = JobPlan("t", "oracle", "oracle_tsdf", {}, "scannet", "scannet", "scannet", "scannet_like_tiny", 0, "tiny")
     row = run_jobs([Job(plan, method_config("oracle_tsdf", "tiny"), f"job{bad}")], tmp_path, show_progress=False,
                    executor=LocalExecutor(workers=1))[0]
@@ -116,7 +117,7 @@ def test_pending_methods_are_reported_not_run():
 
 
 def test_unknown_override_key_is_an_error():
-    from bench.errors import BenchInputError
+    from bench.data.errors import BenchInputError
 
     with pytest.raises(BenchInputError, match="voxel_sise"):
         method_config("oracle_tsdf", "tiny", {"voxel_sise": 0.1})
@@ -140,7 +141,7 @@ def test_cli_list(capsys):
 
 
 def test_cli_scenes_make_then_load(tmp_path, capsys):
-    from bench.formats import load_scene
+    from bench.data.formats import load_scene
 
     assert main(["scenes", "make", "dtu_like_0", "--out", str(tmp_path / "dtu"), "--scale", "tiny"]) == 0
     scene = load_scene(tmp_path / "dtu")
@@ -178,12 +179,12 @@ def test_unwritable_out_fails_before_any_job(tmp_path, capsys):
 def test_failed_job_makes_run_exit_1_and_plain_log_has_a_line_per_job(tmp_path, monkeypatch, capsys):
     """Not a terminal (pytest captures stdout): one plain line per job event; a failed job still writes the
     tables, and the exit status says it failed."""
-    import bench.runner as runner
+    import bench.execute as execute
 
     def broken(*a, **k):
         raise ValueError("evaluation exploded")
 
-    monkeypatch.setattr(runner, "evaluate_snapshot", broken)
+    monkeypatch.setattr(execute, "evaluate_snapshot", broken)
     code = main(["run", "--table", "ablation", "--scale", "tiny", "--rows", ORACLE, "--out", str(tmp_path), "--workers", "1"])
     captured = capsys.readouterr()
     assert code == 1

@@ -113,7 +113,7 @@ def test_converged_rows_keep_the_verdict_and_no_spec_changes_nothing(tmp_path: P
 
 
 def test_bad_convergence_block_names_the_key(tmp_path: Path) -> None:
-    from bench.errors import BenchInputError
+    from bench.data.errors import BenchInputError
 
     p = tmp_path / "conv.yaml"
     p.write_text(yaml.safe_dump({**SPEC, "convergence": {"metric": "psnr"}}, sort_keys=False))

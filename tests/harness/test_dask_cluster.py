@@ -19,7 +19,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from bench.executors.dask import DaskExecutor
 from bench.executors.local import LocalExecutor

@@ -19,8 +19,8 @@ from bench.executors import make_executor
 from bench.executors.base import WORKER_LOST, prepare_dataset, threads_per_job
 from bench.executors.dask import DaskExecutor
 from bench.executors.local import LocalExecutor
-from bench.runner import Job, failure_row, needs_run, result_path, row_head, run_jobs
-from bench.tables import JobPlan
+from bench.jobs import Job, JobPlan, failure_row, result_path, row_head
+from bench.runner import needs_run, run_jobs
 
 
 def _job(i: int, tag: str = "") -> Job:
@@ -167,7 +167,7 @@ def test_two_workers_synthesising_the_same_dataset(tmp_path):
 
 
 def test_prepare_dataset_loser_of_an_unlocked_race_uses_the_winner(tmp_path, monkeypatch):
-    import bench.datasets as datasets
+    import bench.data.datasets as datasets
 
     real = datasets.ensure_dataset
     calls = []
@@ -205,7 +205,6 @@ def test_pool_workers_get_their_share_of_threads(tmp_path):
 
 def test_sigterm_stops_the_workers(tmp_path):
     """A killed `bench run` (SIGTERM: `kill`, a CI timeout) exits 130 and leaves no worker training on."""
-    import os
     import signal
     import subprocess
     import sys
@@ -286,7 +285,7 @@ def test_kill_9_of_the_main_process_takes_the_pool_with_it(tmp_path):
 def test_a_damaged_cached_dataset_is_synthesised_again(tmp_path, capsys):
     """A file of a cached dataset damaged after it was written (here: cameras.npz truncated) would fail every
     job that uses it; the loader moves the copy aside and synthesises it again, once."""
-    from bench.datasets import ensure_dataset, load_dataset
+    from bench.data.datasets import ensure_dataset, load_dataset
 
     folder = ensure_dataset("scannet_like_tiny", "tiny", tmp_path)
     good = load_dataset("scannet_like_tiny", "tiny", tmp_path)

@@ -79,7 +79,7 @@ def test_a_table_may_name_a_dataset_folder_as_a_scene(tmp_path):
     table's scene; the job id follows the folder's bytes."""
     import shutil as sh
 
-    from bench.datasets import ensure_dataset, scene_hash
+    from bench.data.datasets import ensure_dataset, scene_hash
 
     mine = tmp_path / "my_scan"
     sh.copytree(ensure_dataset("scannet_like_tiny", "tiny"), mine)

@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from bench.cli import main
-from bench.errors import BenchInputError
+from bench.data.errors import BenchInputError
 from bench.regress import RegressResult, compare, make_reference, summarise, to_markdown
 from bench.report import build_table, collect_results
 from bench.tables import TableSpec, load_table_spec

@@ -13,12 +13,13 @@ from pathlib import Path
 import yaml
 
 import bench.cli as cli
+from bench.pipeline import SHIPPED_TABLES
 
 ROW = "+Mono Uncertainty"
 
 
 def _tables_dir(tmp_path: Path, name: str, disable: str | None) -> Path:
-    spec = yaml.safe_load((cli.TABLES_DIR / "ablation.yaml").read_text())
+    spec = yaml.safe_load((SHIPPED_TABLES / "ablation.yaml").read_text())
     if disable is not None:
         row = next(r for r in spec["rows"] if r["label"] == ROW)
         row["overrides"] = {**row["overrides"], disable: False}
@@ -28,20 +29,19 @@ def _tables_dir(tmp_path: Path, name: str, disable: str | None) -> Path:
     return d
 
 
-def test_regress_fails_when_the_uncertainty_module_is_disabled(tmp_path, monkeypatch):
+def test_regress_fails_when_the_uncertainty_module_is_disabled(tmp_path):
     ref_dir, out = tmp_path / "reference", tmp_path / "out"
     args = ["regress", "--table", "ablation", "--scale", "tiny", "--rows", ROW, "--quiet",
             "--out", str(out), "--reference-dir", str(ref_dir)]
 
-    monkeypatch.setattr(cli, "TABLES_DIR", _tables_dir(tmp_path, "intact", None))
-    assert cli.main(args + ["--update-reference"]) == 0
+    intact = ["--tables-dir", str(_tables_dir(tmp_path, "intact", None))]
+    assert cli.main(args + intact + ["--update-reference"]) == 0
     stored = json.loads((ref_dir / "tiny" / "ablation.json").read_text())["cells"][ROW]["scannet"]
     assert {"fscore", "unc_mean_thin", "unc_mean_planar"} <= set(stored)
 
-    assert cli.main(args) == 0, "an unchanged rerun must pass (deterministic at one seed)"
+    assert cli.main(args + intact) == 0, "an unchanged rerun must pass (deterministic at one seed)"
 
-    monkeypatch.setattr(cli, "TABLES_DIR", _tables_dir(tmp_path, "broken", "uncertainty"))
-    assert cli.main(args) == 1
+    assert cli.main(args + ["--tables-dir", str(_tables_dir(tmp_path, "broken", "uncertainty"))]) == 1
     report = json.loads((out / "tiny" / "regress_ablation.json").read_text())
     assert report["passed"] is False
     missing = {f["metric"] for f in report["findings"] if f["verdict"] == "missing"}

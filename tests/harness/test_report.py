@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 import yaml
 
-from bench.errors import BenchInputError
+from bench.data.errors import BenchInputError
 from bench.report import build_table, collect_results, render_report, to_markdown, write_table_outputs
 from bench.tables import TableSpec, load_table_spec
 
@@ -270,7 +270,7 @@ def test_table_outputs_are_all_or_nothing_on_a_full_disk(tmp_path, monkeypatch):
     """The disk fills while a table's files are written: no target file is touched, no temporary stays."""
     import os
 
-    import bench.atomic as atomic
+    import bench.data.atomic as atomic
 
     real_fdopen, calls = os.fdopen, []
 
@@ -297,7 +297,7 @@ def test_atomic_writes_get_the_usual_file_mode(tmp_path: Path) -> None:
     """Files written through a temporary (mkstemp: 0600) end with the mode open() would give (0666 - umask)."""
     import os
 
-    from bench.atomic import atomic_write_bytes, atomic_write_many
+    from bench.data.atomic import atomic_write_bytes, atomic_write_many
 
     umask = os.umask(0o022)
     try:

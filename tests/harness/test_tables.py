@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 import yaml
 
-from bench.errors import BenchInputError
+from bench.data.errors import BenchInputError
 from bench.tables import list_tables, load_table_spec, parse_table_spec, plan_jobs, resolve
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"

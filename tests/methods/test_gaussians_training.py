@@ -110,7 +110,7 @@ def test_strategy_grows_prunes_and_keeps_adam_state_aligned():
 
 @pytest.fixture(scope="module")
 def tiny_scene():
-    from bench.datasets import load_dataset
+    from bench.data.datasets import load_dataset
 
     return load_dataset("llff_like_0", "tiny")
 

@@ -13,7 +13,7 @@ from methods.registry import method_config
 
 @pytest.fixture(scope="module")
 def tiny_scene():
-    from bench.datasets import load_dataset
+    from bench.data.datasets import load_dataset
 
     return load_dataset("scannet_like_tiny", "tiny")
 

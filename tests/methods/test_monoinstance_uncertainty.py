@@ -12,7 +12,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from bench.datasets import load_dataset
+from bench.data.datasets import load_dataset
 from methods.monoinstance import (
     adjusted_rand_index,
     align_mono_depth,
@@ -198,7 +198,7 @@ def test_zero_volume_instance_all_points_identical():
     X = np.array([0.0, 0.0, 2.0])
     for v in range(n):
         p = K0 @ (X - c2w[v, :3, 3])
-        u, r = p[0] / p[2], p[1] / p[2]
+        u = p[0] / p[2]
         c2w[v, 0, 3] += (u - round(u)) * 2.0 / K0[0, 0]  # put X exactly on a pixel centre
         p = K0 @ (X - c2w[v, :3, 3])
         depth[v, int(round(p[1] / p[2])), int(round(p[0] / p[2]))] = 2.0

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from bench.errors import BenchInputError
+from bench.data.errors import BenchInputError
 from methods.monosdf.field import ColorNetwork, LaplaceDensity, SDFNetwork, linear_blocks, sdf_gradient_autograd
 from methods.monosdf.grid import (
     FeatureGrid,
@@ -24,7 +24,7 @@ from methods.registry import method_config
 
 @pytest.fixture(scope="module")
 def tiny_scene():
-    from bench.datasets import load_dataset
+    from bench.data.datasets import load_dataset
 
     return load_dataset("scannet_like_tiny", "tiny")
 

@@ -8,13 +8,13 @@ import dataclasses
 import numpy as np
 import pytest
 
-from bench.errors import BenchInputError
+from bench.data.errors import BenchInputError
 from methods.oracle_tsdf import fusion_depth
 
 
 @pytest.fixture(scope="module")
 def tiny_scene():
-    from bench.datasets import load_dataset
+    from bench.data.datasets import load_dataset
 
     return load_dataset("scannet_like_tiny", "tiny")
 

@@ -72,7 +72,7 @@ def test_dtu_protocol_with_monosdf_culling_drops_a_floater(monkeypatch):
     """End to end through bench.evaluate: the GT mesh plus a floater outside every mask. With
     ``dtu.cull: monosdf`` the floater is culled before the Chamfer step; both CDs are finite."""
     import bench.evaluate as ev
-    from bench.datasets import load_dataset
+    from bench.data.datasets import load_dataset
     from methods.base import Snapshot
 
     scene = load_dataset("dtu_like_0", "tiny")

@@ -1,4 +1,4 @@
-"""Tests of the effect simulation (bench.synth.effects) on a tiny hand-ray-cast scene.
+"""Tests of the effect simulation (bench.data.synth.effects) on a tiny hand-ray-cast scene.
 
 The scene: 4 views, 64 x 48, of a finite floor (background), a thin vertical pole and a box, ray-cast
 analytically in numpy; priors initialised to exact GT as the synthesizer does.
@@ -14,9 +14,10 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from bench.errors import BenchInputError
-from bench.scene import InstanceInfo, Scene, pixel_rays_camera
-from bench.synth.effects import (
+from bench.data.errors import BenchInputError
+from bench.data.scene import InstanceInfo, Scene
+from metrics.camera import pixel_rays
+from bench.data.synth.effects import (
     EFFECTS,
     PRIOR_PROFILES,
     apply_effects,
@@ -104,7 +105,7 @@ def _cast(o: np.ndarray, d: np.ndarray):
 def _build_scene() -> Scene:
     n_views = 4
     K = np.array([[55.0, 0.0, (W - 1) / 2], [0.0, 55.0, (H - 1) / 2], [0.0, 0.0, 1.0]])
-    dirs_cam = pixel_rays_camera(K, H, W).reshape(-1, 3)
+    dirs_cam = pixel_rays(K, H, W).reshape(-1, 3)
     c2w, depth, normal, inst, images = [], [], [], [], []
     albedo = {0: 0.0, FLOOR: 0.6, POLE: 0.9, BOX: 0.4, WALL: 0.75}
     for i in range(n_views):
@@ -332,7 +333,7 @@ def _check_unit_and_facing(s: Scene) -> None:
         n = s.mono_normal[v]
         assert np.allclose(np.linalg.norm(n[valid], axis=-1), 1.0, atol=1e-5)
         assert (n[~valid] == 0).all()
-        dirs = pixel_rays_camera(s.intrinsics[v], s.height, s.width)
+        dirs = pixel_rays(s.intrinsics[v], s.height, s.width)
         assert ((n * dirs).sum(-1)[valid] < 0).all()
 
 

@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.datasets import load_dataset, recipe_hash, recipe_path
-from bench.errors import BenchInputError
-from bench.synth.recipe import load_recipe, with_effect_overrides
+from bench.data.datasets import load_dataset, recipe_hash, recipe_path
+from bench.data.errors import BenchInputError
+from bench.data.synth.recipe import load_recipe, with_effect_overrides
 
 SCENE = "scannet_like_tiny"
 

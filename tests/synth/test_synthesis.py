@@ -10,13 +10,13 @@ import pytest
 import trimesh
 import yaml
 
-from bench.errors import BenchInputError
-from bench.scene import backproject_depth
-from bench.synth import cameras as cams
-from bench.synth.geometry import SceneObject, _box
-from bench.synth.make import make_dataset, make_scene
-from bench.synth.recipe import load_recipe, parse_recipe
-from bench.synth.render import SceneRaycaster
+from bench.data.errors import BenchInputError
+from metrics.camera import backproject
+from bench.data.synth import cameras as cams
+from bench.data.synth.geometry import SceneObject, _box
+from bench.data.synth.make import make_dataset, make_scene
+from bench.data.synth.recipe import load_recipe, parse_recipe
+from bench.data.synth.render import SceneRaycaster
 
 REPO = Path(__file__).resolve().parents[2]
 SCENES = REPO / "configs" / "scenes"
@@ -51,7 +51,7 @@ def test_raycaster_returns_z_depth_and_camera_frame_normals():
     pose = cams.look_at(np.array([0.0, 0.0, 0.0]), np.array([0.3, 2.0, 0.2]))
     rgb, depth, normal, inst = rc.render(K, pose, 48, 64)
     assert np.all(inst == 1) and np.all(depth > 0)
-    pts = backproject_depth(depth.astype(np.float64), K, pose)
+    pts = backproject(depth.astype(np.float64), K, pose)
     np.testing.assert_allclose(pts[..., 1], 2.0, atol=1e-4)  # every back-projected point lies on the wall plane y = 2
     n_world = normal.reshape(-1, 3) @ pose[:3, :3].T
     np.testing.assert_allclose(n_world, np.tile([0.0, -1.0, 0.0], (48 * 64, 1)), atol=1e-5)
@@ -77,7 +77,7 @@ def test_shipped_recipes_render_sensible_scenes(name):
     assert hit.mean() > 0.8
     # GT depth back-projects onto the GT mesh (z-depth convention end to end)
     v = 0
-    pts = backproject_depth(scene.gt_depth[v].astype(np.float64), scene.intrinsics[v], scene.cam_to_world[v])[hit[v]]
+    pts = backproject(scene.gt_depth[v].astype(np.float64), scene.intrinsics[v], scene.cam_to_world[v])[hit[v]]
     sub = pts[:: max(1, len(pts) // 500)]
     dist = _distance_to_mesh(mesh, sub)
     assert np.percentile(dist, 99) < 5e-3

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import json
 
-from bench.cli import TABLES_DIR, main
+from bench.cli import main
+from bench.pipeline import SHIPPED_TABLES as TABLES_DIR
 from bench.runner import resolve_jobs
 from bench.tables import list_tables, load_table_spec, plan_jobs
 

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from bench.errors import BenchInputError
+from bench.data.errors import BenchInputError
 from methods.base import Artifacts, Snapshot
 from metrics.culling import block_resolution_for, tsdf_refuse
 

@@ -17,10 +17,10 @@ from typing import Any
 
 import numpy as np
 
-from bench.scene import Scene
+from bench.data.scene import Scene
 
 from ._params import param
-from .registry import register
+from .registry import apply_effects, register
 
 PRIOR_PROFILES: dict[str, list[dict[str, Any]]] = {
     # Omnidata (DPT-hybrid, scale-and-shift-invariant training; the prior MonoSDF uses): relative depth,
@@ -86,7 +86,11 @@ class PriorProfileParams:
     )
 
 
-@register("prior_profile", PriorProfileParams, needs=("mono_depth",))
+def _expand(p: PriorProfileParams) -> tuple[str, list[dict[str, Any]]]:
+    return p.profile, PRIOR_PROFILES[p.profile]
+
+
+@register("prior_profile", PriorProfileParams, needs=("mono_depth",), expands=_expand)
 def prior_profile(scene: Scene, p: PriorProfileParams, rng: np.random.Generator) -> dict[str, Any]:
     """A named preset list of depth/normal prior effects simulating one monocular estimator.
 
@@ -100,6 +104,4 @@ def prior_profile(scene: Scene, p: PriorProfileParams, rng: np.random.Generator)
 
     Parameters: profile (one of ``PRIOR_PROFILES``).
     """
-    from .registry import apply_effects
-
     return {"expanded": apply_effects(scene, PRIOR_PROFILES[p.profile], rng, where=f"profile '{p.profile}'")}

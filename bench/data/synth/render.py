@@ -12,9 +12,9 @@ from dataclasses import dataclass
 import numpy as np
 import open3d as o3d
 
-from bench.scene import pixel_rays_camera
-from bench.synth.geometry import SceneObject
-from bench.synth.shading import shade, texture_factor
+from metrics.camera import pixel_rays
+from bench.data.synth.geometry import SceneObject
+from bench.data.synth.shading import shade, texture_factor
 
 
 @dataclass
@@ -64,7 +64,7 @@ class SceneRaycaster:
             rgb (H, W, 3) float32, depth (H, W) float32 (z-depth, 0 = miss),
             normal (H, W, 3) float32 (camera frame), instance (H, W) int32.
         """
-        dirs_cam = pixel_rays_camera(K, height, width).reshape(-1, 3)
+        dirs_cam = pixel_rays(K, height, width).reshape(-1, 3)
         R, t = cam_to_world[:3, :3], cam_to_world[:3, 3]
         dirs_world = dirs_cam @ R.T
         rays = np.concatenate([np.broadcast_to(t, dirs_world.shape), dirs_world], axis=1).astype(np.float32)

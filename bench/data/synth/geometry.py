@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from bench.errors import BenchInputError
+from bench.data.errors import BenchInputError
 
 BACKGROUND_CATEGORIES = ("wall", "floor", "ceiling", "ground")
 
@@ -33,7 +33,7 @@ class SceneObject:
         is_background: wall / floor / ceiling / ground plane.
         is_thin: has thin parts (legs, poles, stems, wires).
         albedo: (3,) base RGB in [0, 1].
-        texture: procedural texture name, see ``bench.synth.shading.TEXTURES`` ("none" = textureless).
+        texture: procedural texture name, see ``bench.data.synth.shading.TEXTURES`` ("none" = textureless).
         texture_scale: spatial period of the texture in metres.
     """
 

@@ -26,8 +26,8 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from bench.errors import BenchInputError
-from bench.formats.npz import load_npy, save_npy
+from bench.data.errors import BenchInputError
+from bench.data.formats.npz import load_npy, save_npy
 
 
 def _open_image(path: Path) -> Image.Image:

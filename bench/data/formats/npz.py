@@ -15,7 +15,7 @@ from typing import Mapping
 
 import numpy as np
 
-from bench.errors import BenchInputError
+from bench.data.errors import BenchInputError
 
 _FIXED_DATE = (1980, 1, 1, 0, 0, 0)
 

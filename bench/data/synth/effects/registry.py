@@ -9,8 +9,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from bench.errors import BenchInputError
-from bench.scene import Scene
+from bench.data.errors import BenchInputError
+from bench.data.scene import Scene
 
 from ._params import params_to_record, parse_params
 
@@ -28,12 +28,16 @@ class EffectSpec:
         fn: ``fn(scene, params, rng)``; modifies ``scene`` in place.
         params_cls: frozen dataclass of typed parameters with defaults (see ``_params.param``).
         needs: Scene fields that must be present (not None) for the effect to run.
+        expands: for a composite effect (a preset list of other effects, e.g. ``prior_profile``):
+            ``expands(params) -> (label, effect list)``; the list is validated and applied in its place
+            and recorded under ``"expanded"``. Composites do not nest. None for a plain effect.
     """
 
     name: str
     fn: EffectFn
     params_cls: type
     needs: tuple[str, ...] = ()
+    expands: Callable[[Any], "tuple[str, list[dict[str, Any]]]"] | None = None
 
     @property
     def doc(self) -> str:
@@ -47,13 +51,15 @@ class EffectSpec:
 EFFECTS: dict[str, EffectSpec] = {}
 
 
-def register(name: str, params_cls: type, needs: tuple[str, ...] = ()) -> Callable[[EffectFn], EffectFn]:
-    """Decorator registering ``fn`` under ``name`` with its parameter dataclass."""
+def register(name: str, params_cls: type, needs: tuple[str, ...] = (),
+             expands: Callable[[Any], "tuple[str, list[dict[str, Any]]]"] | None = None) -> Callable[[EffectFn], EffectFn]:
+    """Decorator registering ``fn`` under ``name`` with its parameter dataclass (``expands``: see
+    :class:`EffectSpec`)."""
 
     def deco(fn: EffectFn) -> EffectFn:
         if name in EFFECTS:
             raise RuntimeError(f"effect {name!r} registered twice")
-        EFFECTS[name] = EffectSpec(name, fn, params_cls, tuple(needs))
+        EFFECTS[name] = EffectSpec(name, fn, params_cls, tuple(needs), expands)
         return fn
 
     return deco
@@ -61,7 +67,7 @@ def register(name: str, params_cls: type, needs: tuple[str, ...] = ()) -> Callab
 
 @dataclass(frozen=True)
 class _Planned:
-    """One validated effect: spec + parsed params, or a profile with its expansion."""
+    """One validated effect: spec + parsed params, or a composite with its expansion."""
 
     spec: EffectSpec
     params: Any
@@ -69,8 +75,6 @@ class _Planned:
 
 
 def _plan(effects: Any, where: str, *, inside_profile: str | None = None) -> list[_Planned]:
-    from .profiles import PRIOR_PROFILES
-
     if effects is None:
         return []
     if not isinstance(effects, (list, tuple)):
@@ -90,10 +94,11 @@ def _plan(effects: Any, where: str, *, inside_profile: str | None = None) -> lis
         raw = {k: v for k, v in entry.items() if k != "name"}
         params = parse_params(name, spec.params_cls, raw, where)
         expanded: tuple[_Planned, ...] = ()
-        if name == "prior_profile":
+        if spec.expands is not None:
             if inside_profile is not None:
-                raise BenchInputError(where, f"effect 'prior_profile' cannot be nested (in profile '{inside_profile}')")
-            expanded = tuple(_plan(PRIOR_PROFILES[params.profile], where, inside_profile=params.profile))
+                raise BenchInputError(where, f"effect '{name}' cannot be nested (in profile '{inside_profile}')")
+            label, effects_list = spec.expands(params)
+            expanded = tuple(_plan(effects_list, where, inside_profile=label))
         plan.append(_Planned(spec, params, expanded))
     return plan
 

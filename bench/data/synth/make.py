@@ -15,12 +15,12 @@ import numpy as np
 import trimesh
 
 from bench import __version__
-from bench.atomic import atomic_directory
-from bench.errors import BenchInputError
-from bench.scene import InstanceInfo, Scene
-from bench.synth.layouts import build_layout
-from bench.synth.recipe import SCALES, Recipe, load_recipe, resolve_scale, with_effect_overrides
-from bench.synth.render import SceneRaycaster
+from bench.data.atomic import atomic_directory
+from bench.data.errors import BenchInputError
+from bench.data.scene import InstanceInfo, Scene
+from bench.data.synth.layouts import build_layout
+from bench.data.synth.recipe import SCALES, Recipe, load_recipe, resolve_scale, with_effect_overrides
+from bench.data.synth.render import SceneRaycaster
 
 
 def make_scene(recipe: Recipe, scale: str = "small", seed: int | None = None) -> tuple[Scene, trimesh.Trimesh]:
@@ -34,7 +34,7 @@ def make_scene(recipe: Recipe, scale: str = "small", seed: int | None = None) ->
     Returns:
         (scene, gt_mesh): the Scene with priors after effects, and the GT mesh in world metres.
     """
-    from bench.synth.effects import apply_effects
+    from bench.data.synth.effects import apply_effects
 
     if scale not in SCALES:
         raise BenchInputError(recipe.where(), f"scale must be one of {SCALES}, got {scale!r}")
@@ -106,12 +106,12 @@ def make_dataset(
     """Synthesise the recipe and write it to ``out_dir`` in the recipe's format (atomically).
 
     ``effect_overrides``: a scene variant, ``{effect name: {parameter: value}}`` (see
-    :func:`bench.synth.recipe.with_effect_overrides`).
+    :func:`bench.data.synth.recipe.with_effect_overrides`).
 
     Returns:
         A summary: ``{"path", "format", "views", "height", "width", "seconds", "bytes"}``.
     """
-    from bench.formats import write_scene
+    from bench.data.formats import write_scene
 
     t0 = time.perf_counter()
     recipe = with_effect_overrides(load_recipe(recipe_path), effect_overrides)

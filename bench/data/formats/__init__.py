@@ -6,21 +6,21 @@ Public API::
     load_scene(path, fmt=None, **options) -> Scene
     detect_format(path) -> str
 
-Formats (``bench.scene.DATASET_FORMATS``) and the files each loader REQUIRES (everything else optional):
+Formats (``bench.data.scene.DATASET_FORMATS``) and the files each loader REQUIRES (everything else optional):
 
-* ``scannet`` / ``replica`` (:mod:`bench.formats.monosdf`, MonoSDF's preprocessed layout):
+* ``scannet`` / ``replica`` (:mod:`bench.data.formats.monosdf`, MonoSDF's preprocessed layout):
   ``cameras.npz`` (``world_mat_i``, ``scale_mat_i``) and ``*_rgb.png``. Optional real files:
   ``*_depth.npy``, ``*_normal.npy`` (mono priors), Replica ``*_mask.npy``.
-* ``dtu`` (:mod:`bench.formats.dtu`, IDR / NeuS layout): ``image/*.png`` and ``cameras.npz`` (or
+* ``dtu`` (:mod:`bench.data.formats.dtu`, IDR / NeuS layout): ``image/*.png`` and ``cameras.npz`` (or
   ``cameras_sphere.npz``). Optional real files: ``mask/*.png``. Option ``train_views``.
-* ``llff`` (:mod:`bench.formats.llff`): ``poses_bounds.npy`` and ``images/`` (or ``images_{factor}/``
+* ``llff`` (:mod:`bench.data.formats.llff`): ``poses_bounds.npy`` and ``images/`` (or ``images_{factor}/``
   when loading with option ``factor``). Writer options ``factors``, ``bounds``, ``image_name``.
 
 Our extras (GT depth / normals / instance ids, per-view segments, background flags, instance table,
-GT mesh, meta.json) are described in :mod:`bench.formats.extras`; a loader returns None / empty for the
+GT mesh, meta.json) are described in :mod:`bench.data.formats.extras`; a loader returns None / empty for the
 fields whose files are absent, so real preprocessed data loads without them. See ``docs/formats.md``.
 
-Every problem with the input raises one :class:`bench.errors.BenchInputError` naming the file and
+Every problem with the input raises one :class:`bench.data.errors.BenchInputError` naming the file and
 the problem; every loader ends with ``Scene.validate()``. Writing is deterministic: the same Scene
 written twice gives byte-identical files.
 """
@@ -30,10 +30,10 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from bench.errors import BenchInputError
-from bench.formats import dtu, llff, monosdf
-from bench.formats.extras import META_FILE, read_json
-from bench.scene import DATASET_FORMATS, Scene
+from bench.data.errors import BenchInputError
+from bench.data.formats import dtu, llff, monosdf
+from bench.data.formats.extras import META_FILE, read_json
+from bench.data.scene import DATASET_FORMATS, Scene
 
 __all__ = ["write_scene", "load_scene", "detect_format", "DATASET_FORMATS"]
 
@@ -46,7 +46,7 @@ def _check_format(fmt: str, where: str | Path) -> None:
 def write_scene(scene: Scene, out_dir: Path, fmt: str, gt_mesh: Any = None, **fmt_options: Any) -> None:
     """Write ``scene`` into the EXISTING, empty folder ``out_dir`` in format ``fmt``.
 
-    Make it atomic with ``bench.atomic.atomic_directory``. ``gt_mesh`` (a ``trimesh.Trimesh`` in world
+    Make it atomic with ``bench.data.atomic.atomic_directory``. ``gt_mesh`` (a ``trimesh.Trimesh`` in world
     metres) is written as ``gt_mesh.ply``; without it, ``scene.gt_mesh_path`` is copied if it exists.
 
     Args:

@@ -20,10 +20,10 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from bench import __version__
-from bench.errors import BenchInputError
-from bench.scene import Scene
+from bench.data.errors import BenchInputError
+from bench.data.scene import Scene
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
+REPO_ROOT = Path(__file__).resolve().parents[2]  # bench/data/datasets.py -> the repository
 SCENES_DIR = REPO_ROOT / "configs" / "scenes"
 DEFAULT_CACHE = REPO_ROOT / "results" / "cache" / "datasets"
 
@@ -43,7 +43,7 @@ def recipe_hash(path: Path, effects: Mapping[str, Mapping[str, Any]] | None = No
     the recipe already uses, hashes like the plain recipe: the same dataset, shared by every table)."""
     data = path.read_bytes() + __version__.encode()
     if effects:
-        from bench.synth.recipe import load_recipe, with_effect_overrides
+        from bench.data.synth.recipe import load_recipe, with_effect_overrides
 
         recipe = load_recipe(path)
         variant = with_effect_overrides(recipe, {k: dict(v) for k, v in effects.items()})
@@ -79,7 +79,7 @@ def ensure_dataset(scene_name: str, scale: str, cache_dir: Path = DEFAULT_CACHE,
                    effects: Mapping[str, Mapping[str, Any]] | None = None) -> Path:
     """Return the dataset folder of ``scene_name`` (variant ``effects``) at ``scale``, synthesising it if not
     cached; a dataset folder named as the scene is returned as it is (no variant possible)."""
-    from bench.synth.make import make_dataset
+    from bench.data.synth.make import make_dataset
 
     if is_folder_scene(scene_name):
         if effects:
@@ -96,9 +96,9 @@ def ensure_dataset(scene_name: str, scale: str, cache_dir: Path = DEFAULT_CACHE,
 def load_dataset(scene_name: str, scale: str, cache_dir: Path = DEFAULT_CACHE,
                  effects: Mapping[str, Mapping[str, Any]] | None = None) -> Scene:
     """Synthesise (if needed) and load a scene; LLFF scenes load their ``images_N`` downsampled copy."""
-    from bench.formats import load_scene
+    from bench.data.formats import load_scene
 
-    from bench.synth.recipe import load_recipe
+    from bench.data.synth.recipe import load_recipe
 
     if is_folder_scene(scene_name):  # a user's own folder: loaded as it is (LLFF at its full resolution)
         return load_scene(ensure_dataset(scene_name, scale, cache_dir, effects=effects))

@@ -17,9 +17,9 @@ from typing import Any
 import numpy as np
 import trimesh
 
-from bench.errors import BenchInputError
-from bench.synth import cameras as cams
-from bench.synth.geometry import (
+from bench.data.errors import BenchInputError
+from bench.data.synth import cameras as cams
+from bench.data.synth.geometry import (
     FURNITURE,
     PALETTE,
     SceneObject,
@@ -29,8 +29,8 @@ from bench.synth.geometry import (
     load_user_mesh,
     place_on_floor,
 )
-from bench.synth.recipe import Recipe, check_number, resolve_mesh_path
-from bench.synth.shading import TEXTURES
+from bench.data.synth.recipe import Recipe, check_number, resolve_mesh_path
+from bench.data.synth.shading import TEXTURES
 
 ROOM_PRESETS: dict[str, dict[str, Any]] = {
     # ScanNet: hand-held RGB-D sweeps of ordinary rooms; shaky trajectories.
@@ -223,7 +223,7 @@ def build_forward(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layou
     object entry may fix its position with ``x`` (sideways) and ``y`` (depth), metres.
     Cameras (``cameras:``): ``path: grid`` (default; ``grid``, ``spacing``) or ``path: handheld``
     (``views``, ``extent`` [w, h] m, ``rows``, ``jitter``, ``look_jitter`` degrees; see
-    :func:`bench.synth.cameras.handheld_forward`), ``hfov``, ``look_distance``."""
+    :func:`bench.data.synth.cameras.handheld_forward`), ``hfov``, ``look_distance``."""
     specs = _expand(recipe.raw.get("objects") or [{"type": "plant"}, {"type": "lamp"}, {"type": "chair"}, {"type": "table"}, {"type": "cabinet"}],
                     recipe.where())
     far = float(recipe.number("forward", "back_wall", scale=scale, default=6.0, lo=0.5, hi=100.0))

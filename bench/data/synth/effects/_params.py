@@ -3,7 +3,7 @@
 Each effect declares its parameters as a frozen dataclass whose fields are made with :func:`param`,
 which records the kind (``float``, ``int``, ``bool``, ``range``, ``choice``), the allowed interval,
 the unit and a one-line description. :func:`parse_params` turns a recipe dict into that dataclass or
-raises one :class:`~bench.errors.BenchInputError` naming the effect, the parameter and the problem.
+raises one :class:`~bench.data.errors.BenchInputError` naming the effect, the parameter and the problem.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from bench.errors import BenchInputError
+from bench.data.errors import BenchInputError
 
 KINDS = ("float", "int", "bool", "range", "choice")
 

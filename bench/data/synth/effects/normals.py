@@ -7,7 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from bench.scene import Scene, pixel_rays_camera
+from bench.data.scene import Scene
+from metrics.camera import pixel_rays
 
 from ._params import param
 from .registry import register
@@ -60,7 +61,7 @@ def normals_from_depth(depth: np.ndarray, K: np.ndarray) -> np.ndarray:
     """
     h, w = depth.shape
     valid = depth > 0
-    dirs = pixel_rays_camera(K, h, w)
+    dirs = pixel_rays(K, h, w)
     pts = dirs * depth[..., None]
     gu, ok_u = _one_sided_gradient(pts, valid, depth, axis=1)
     gv, ok_v = _one_sided_gradient(pts, valid, depth, axis=0)
@@ -140,7 +141,7 @@ def normal_from_depth(scene: Scene, p: NormalFromDepthParams, rng: np.random.Gen
             d = _align_scale_shift(d, scene.gt_depth[v].astype(np.float64))
         K = np.asarray(scene.intrinsics[v], dtype=np.float64)
         n = normals_from_depth(d, K)
-        dirs = pixel_rays_camera(K, h, w)
+        dirs = pixel_rays(K, h, w)
         if p.blend_gt > 0 and scene.gt_normal is not None:
             g = scene.gt_normal[v].astype(np.float64)
             has_gt = np.linalg.norm(g, axis=-1) > 0.5

@@ -6,7 +6,7 @@ Files of the real format:
 file                        needed?   content
 ==========================  ========  =====================================================================
 ``poses_bounds.npy``        required  (N, 17) float64: (3, 5) ``[down, right, backwards | centre | hwf]``
-                                      flattened row-major, then near, far (see :mod:`bench.formats.cameras`)
+                                      flattened row-major, then near, far (see :mod:`bench.data.formats.cameras`)
 ``images/*``                factor 1  full-resolution images (.png / .jpg), sorted by name = pose order
 ``images_{N}/*``            factor N  the same images downsampled by N (needed only when loading with
                                       ``factor=N``)
@@ -14,7 +14,7 @@ file                        needed?   content
 
 Our extras (optional, always at FULL resolution): ``mono_depth/``, ``mono_normal/``, ``gt_depth/``,
 ``gt_normal/``, ``gt_instance/``, ``seg/`` sub-folders and ``meta.json``, ``segments.json``,
-``instances.json``, ``gt_mesh.ply`` (see :mod:`bench.formats.extras`). ``meta.json`` also carries the
+``instances.json``, ``gt_mesh.ply`` (see :mod:`bench.data.formats.extras`). ``meta.json`` also carries the
 scene's ``scale_mat`` (the format has none).
 
 Intrinsics. LLFF stores one focal length per view (``hwf``) and assumes the principal point at the
@@ -50,11 +50,11 @@ from typing import Any, Sequence
 import numpy as np
 from PIL import Image
 
-from bench.errors import BenchInputError
-from bench.formats import codec, extras
-from bench.formats.cameras import is_rotation, llff_to_opencv, opencv_to_llff
-from bench.formats.npz import load_npy, save_npy
-from bench.scene import Scene
+from bench.data.errors import BenchInputError
+from bench.data.formats import codec, extras
+from bench.data.formats.cameras import is_rotation, llff_to_opencv, opencv_to_llff
+from bench.data.formats.npz import load_npy, save_npy
+from bench.data.scene import Scene
 
 POSES_FILE = "poses_bounds.npy"
 _IMAGE_EXTS = {".png", ".jpg", ".jpeg"}

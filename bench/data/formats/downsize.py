@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.errors import BenchInputError
-from bench.scene import Scene
+from bench.data.errors import BenchInputError
+from bench.data.scene import Scene
 
 
 def _blocks(arr: np.ndarray, n: int) -> np.ndarray:
@@ -92,8 +92,8 @@ def downsize_scene(scene: Scene, n: int) -> Scene:
 
 def downsize_folder(src: Path, dst: Path, n: int, overwrite: bool = False) -> Scene:
     """Load ``src`` (any format), write it at 1 / ``n`` into ``dst`` in the same format; returns the result."""
-    from bench.atomic import atomic_directory
-    from bench.formats import detect_format, load_scene, write_scene
+    from bench.data.atomic import atomic_directory
+    from bench.data.formats import detect_format, load_scene, write_scene
 
     fmt = detect_format(Path(src))
     small = downsize_scene(load_scene(Path(src), fmt), n)

@@ -1,4 +1,4 @@
-"""Camera matrix conversions between the on-disk conventions and :class:`bench.scene.Scene`'s.
+"""Camera matrix conversions between the on-disk conventions and :class:`bench.data.scene.Scene`'s.
 
 Scene convention: ``cam_to_world`` (4, 4) float64, OpenCV axes (x right, y down, z forward), world
 metres; K (3, 3) in pixels with integer pixel centres.
@@ -26,7 +26,7 @@ from typing import Callable
 
 import numpy as np
 
-from bench.errors import BenchInputError
+from bench.data.errors import BenchInputError
 
 
 # ------------------------------------------------------------------------------ projection matrices

@@ -1,6 +1,6 @@
 """Effect simulation: what goes wrong in real monocular priors, segmentations and captures.
 
-The synthesizer initialises the priors of a rendered :class:`~bench.scene.Scene` to exact ground
+The synthesizer initialises the priors of a rendered :class:`~bench.data.scene.Scene` to exact ground
 truth and calls :func:`apply_effects` with the recipe's effect list; each effect is a small registered
 function with typed, validated parameters (see ``EFFECTS`` and ``docs/effects.md``).
 

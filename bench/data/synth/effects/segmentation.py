@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from bench.scene import Scene
+from bench.data.scene import Scene
 
 from ._params import param
 from .registry import register

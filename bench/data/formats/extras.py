@@ -41,10 +41,10 @@ from typing import Any, Callable
 
 import numpy as np
 
-from bench.atomic import dumps_json
-from bench.errors import BenchInputError
-from bench.formats import codec
-from bench.scene import InstanceInfo, Scene
+from bench.data.atomic import dumps_json
+from bench.data.errors import BenchInputError
+from bench.data.formats import codec
+from bench.data.scene import InstanceInfo, Scene
 
 META_FILE = "meta.json"
 SEGMENTS_FILE = "segments.json"
@@ -253,7 +253,7 @@ def build_scene(root: Path, fmt: str, kind: str, images: np.ndarray, K: np.ndarr
                 metadata_extra: dict[str, Any] | None = None) -> "Scene":
     """The one place every loader turns what it read into a validated :class:`Scene`: the format's own
     arrays, our optional per-view maps and side files, then meta.json (name / kind / splits / metadata)."""
-    from bench.scene import Scene
+    from bench.data.scene import Scene
 
     kwargs: dict[str, Any] = dict(name=root.name, kind=kind, source_format=fmt, images=images, intrinsics=K, cam_to_world=c2w,
                                   scale_mat=scale_mat, seg_background=side.seg_background, instances=side.instances,

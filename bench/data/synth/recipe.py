@@ -27,7 +27,7 @@ of 2-5 m). Object (DTU-like) cameras: ``distance``, ``hfov``, ``train_azimuths``
 ``eval_views``; LLFF-like: ``path`` (``grid``: ``grid``, ``spacing``; ``handheld``: ``views``, ``extent``,
 ``rows``, ``jitter``, ``look_jitter``), ``hfov``, ``look_distance``, ``height``; the LLFF-like layout
 itself under ``forward:`` (``depth_range``, ``back_wall``, ``lateral_spread``, ``wall_texture``,
-``wall_texture_scale``; :func:`bench.synth.layouts.build_forward`).
+``wall_texture_scale``; :func:`bench.data.synth.layouts.build_forward`).
 """
 
 from __future__ import annotations
@@ -39,8 +39,8 @@ from typing import Any
 
 import yaml
 
-from bench.errors import BenchInputError
-from bench.scene import DATASET_FORMATS, SCENE_KINDS
+from bench.data.errors import BenchInputError
+from bench.data.scene import DATASET_FORMATS, SCENE_KINDS
 
 SCALES = ("tiny", "small", "medium", "large")
 

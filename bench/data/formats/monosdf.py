@@ -16,10 +16,10 @@ file                        needed?   content
 
 ``{prefix}`` is the rgb file name without ``_rgb.png`` (``000000`` when we write). Priors are
 all-or-nothing across views. Our extras (GT depth / normal / instances, segments, meta.json, ...) are
-listed in :mod:`bench.formats.extras`; all optional.
+listed in :mod:`bench.data.formats.extras`; all optional.
 
 Loading: poses come from MonoSDF's decomposition of ``world_mat_i @ scale_mat_i``, mapped back to world
-metres (see :mod:`bench.formats.cameras`); matrices are read in float64 (MonoSDF casts to float32).
+metres (see :mod:`bench.data.formats.cameras`); matrices are read in float64 (MonoSDF casts to float32).
 ``Scene.scale_mat`` = ``scale_mat_0``; all ``scale_mat_i`` must be equal. Kind defaults to ``"room"``,
 splits to none (every view trains), unless ``meta.json`` says otherwise.
 """
@@ -32,11 +32,11 @@ from typing import Any
 
 import numpy as np
 
-from bench.errors import BenchInputError
-from bench.formats import codec, extras
-from bench.formats.cameras import check_view_numbering, compose_world_mat, decompose_world_mat
-from bench.formats.npz import load_npy, load_npz, save_npz, save_npy
-from bench.scene import Scene
+from bench.data.errors import BenchInputError
+from bench.data.formats import codec, extras
+from bench.data.formats.cameras import check_view_numbering, compose_world_mat, decompose_world_mat
+from bench.data.formats.npz import load_npy, load_npz, save_npz, save_npy
+from bench.data.scene import Scene
 
 CAMERAS_FILE = "cameras.npz"
 

@@ -17,7 +17,7 @@ file                               needed?   content
 
 Our extras (all optional): ``mono_depth/``, ``mono_normal/``, ``gt_depth/``, ``gt_normal/``,
 ``gt_instance/``, ``seg/`` sub-folders of ``{i:06d}.npy|png`` and the side files ``meta.json``,
-``segments.json``, ``instances.json``, ``gt_mesh.ply`` (see :mod:`bench.formats.extras`).
+``segments.json``, ``instances.json``, ``gt_mesh.ply`` (see :mod:`bench.data.formats.extras`).
 
 The object mask we write = pixels whose GT instance is not background; without GT instances, pixels
 with GT depth > 0; without either, every pixel.
@@ -35,11 +35,11 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from bench.errors import BenchInputError
-from bench.formats import codec, extras
-from bench.formats.cameras import check_view_numbering
-from bench.formats.monosdf import read_cameras_npz, write_cameras_npz
-from bench.scene import Scene
+from bench.data.errors import BenchInputError
+from bench.data.formats import codec, extras
+from bench.data.formats.cameras import check_view_numbering
+from bench.data.formats.monosdf import read_cameras_npz, write_cameras_npz
+from bench.data.scene import Scene
 
 IMAGE_DIR = "image"
 MASK_DIR = "mask"

@@ -11,7 +11,7 @@ Camera convention (used everywhere in the project, whatever the on-disk format):
   surface / invalid".
 * Normal maps are unit vectors in the camera frame (OpenCV axes), oriented towards the camera.
 
-Formats stop at the loaders (``bench/formats``): a method sees only :class:`Scene`.
+Formats stop at the loaders (``bench/data/formats``): a method sees only :class:`Scene`.
 """
 
 from __future__ import annotations
@@ -144,7 +144,7 @@ class Scene:
 
     def load_gt_mesh(self):  # -> trimesh.Trimesh
         """Load the GT mesh (world metres) with trimesh; raises BenchInputError if absent."""
-        from bench.errors import BenchInputError
+        from bench.data.errors import BenchInputError
 
         if self.gt_mesh_path is None or not Path(self.gt_mesh_path).exists():
             raise BenchInputError(self.gt_mesh_path or self.name, "scene has no GT mesh")
@@ -161,11 +161,11 @@ class Scene:
             if arr is None:
                 return
             if tuple(arr.shape) != shape:
-                from bench.errors import BenchInputError
+                from bench.data.errors import BenchInputError
 
                 raise BenchInputError(where, f"{name} has shape {tuple(arr.shape)}, expected {shape}")
             if np.issubdtype(arr.dtype, np.floating) and not np.all(np.isfinite(arr)):
-                from bench.errors import BenchInputError
+                from bench.data.errors import BenchInputError
 
                 raise BenchInputError(where, f"{name} contains NaN or inf")
 
@@ -180,38 +180,6 @@ class Scene:
         check("gt_normal", self.gt_normal, (n, h, w, 3))
         check("gt_instance", self.gt_instance, (n, h, w))
         if self.seg_background is not None and len(self.seg_background) != n:
-            from bench.errors import BenchInputError
+            from bench.data.errors import BenchInputError
 
             raise BenchInputError(where, f"seg_background has {len(self.seg_background)} views, expected {n}")
-
-
-def pixel_rays_camera(K: np.ndarray, height: int, width: int) -> np.ndarray:
-    """Camera-frame ray directions with z = 1 for every pixel.
-
-    Args:
-        K: (3, 3) intrinsics in pixels.
-        height, width: image size in pixels.
-
-    Returns:
-        (H, W, 3) float64 directions ``inv(K) @ [u, v, 1]`` (z component exactly 1), so a point at
-        z-depth d along pixel (v, u) is ``d * dirs[v, u]``.
-    """
-    u, v = np.meshgrid(np.arange(width, dtype=np.float64), np.arange(height, dtype=np.float64))
-    pix = np.stack([u, v, np.ones_like(u)], axis=-1)
-    dirs = pix @ np.linalg.inv(K).T
-    return dirs / dirs[..., 2:3]
-
-
-def backproject_depth(depth: np.ndarray, K: np.ndarray, cam_to_world: np.ndarray) -> np.ndarray:
-    """Back-project a z-depth map to world points.
-
-    Args:
-        depth: (H, W) z-depth in metres (0 = invalid).
-        K: (3, 3) intrinsics; cam_to_world: (4, 4).
-
-    Returns:
-        (H, W, 3) float64 world points (invalid pixels give the camera centre).
-    """
-    dirs = pixel_rays_camera(K, depth.shape[0], depth.shape[1])
-    pts_cam = dirs * depth[..., None]
-    return pts_cam @ cam_to_world[:3, :3].T + cam_to_world[:3, 3]
