@@ -119,7 +119,7 @@ def dtu_setup(scene: Scene, params: dict[str, Any], seed: int) -> dict[str, Any]
     * ``cull: monosdf``: every view's object mask, dilated by MonoSDF's 12 px scaled to the width
       (``cull_masks``; None for ``cull: none``).
     """
-    from metrics.culling import render_depth_maps
+    from metrics.render import render_depth_maps
     from metrics.dtu import DTUParams, dtu_gt_points
 
     layout = (scene.metadata or {}).get("layout") or {}

@@ -43,7 +43,7 @@ def distance_image(mesh: Any, gt_scene: Any, K: np.ndarray, c2w: np.ndarray, h: 
     its :func:`_raycasting_scene`, built once per figure panel); NaN where the ray hits nothing."""
     import open3d as o3d
 
-    from metrics.culling import render_depth_maps
+    from metrics.render import render_depth_maps
 
     depth = render_depth_maps(mesh, K[None], c2w[None], h, w)[0]
     pts = backproject(depth, K, c2w)

@@ -8,7 +8,7 @@ Not a method of the paper: it sees GT depth, which no real method has. It exists
 run -> metrics -> CSV / markdown works end to end, and as a ceiling for every table. Snapshots fuse
 the first 25 / 50 / 100 % of the training views (in capture order), so the accuracy-vs-time curve
 shows how coverage grows with views. Fusion is the same projective TSDF the ScanNet protocol uses
-(``metrics.culling.tsdf_refuse``).
+(``metrics.tsdf.tsdf_refuse``).
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from bench.data.errors import BenchInputError
 from bench.data.scene import Scene
 from methods.base import Artifacts, ProgressFn, Snapshot
 from methods.registry import register
-from metrics.culling import MONOSDF_BLOCK_M, block_resolution_for, tsdf_refuse
+from metrics.tsdf import MONOSDF_BLOCK_M, block_resolution_for, tsdf_refuse
 from metrics.depth import align_depth
 
 

@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
+WORLD_UP = np.array([0.0, 0.0, 1.0])
+
 
 def pixels_to_rays(K: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Camera-frame ray directions with z = 1 through pixel coordinates (u, v) (may be fractional).
@@ -72,3 +74,19 @@ def project(points: np.ndarray, K: np.ndarray, cam_to_world: np.ndarray) -> tupl
         u = np.where(z > 0, pix[:, 0] / z, np.nan)
         v = np.where(z > 0, pix[:, 1] / z, np.nan)
     return u, v, z
+
+
+def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = WORLD_UP) -> np.ndarray:
+    """(4, 4) float64 camera-to-world pose at ``eye`` looking at ``target`` (3-vectors, world metres;
+    OpenCV axes: columns right, down, forward; ``up`` the world's up, default +z)."""
+    eye, target = np.asarray(eye, dtype=np.float64), np.asarray(target, dtype=np.float64)
+    f = target - eye
+    f = f / np.linalg.norm(f)
+    r = np.cross(f, up)
+    if np.linalg.norm(r) < 1e-8:  # looking straight up/down: pick any right vector
+        r = np.cross(f, np.array([1.0, 0.0, 0.0]))
+    r = r / np.linalg.norm(r)
+    d = np.cross(f, r)
+    pose = np.eye(4)
+    pose[:3, 0], pose[:3, 1], pose[:3, 2], pose[:3, 3] = r, d, f, eye
+    return pose

@@ -37,7 +37,8 @@ from typing import Any
 import numpy as np
 
 from metrics._checks import as_cameras, as_points, check_positive
-from metrics.culling import points_visible, render_depth_maps
+from metrics.culling import points_visible
+from metrics.render import render_depth_maps
 from metrics.mesh import EmptyReconstructionError, check_pred_mesh, clean_mesh
 from metrics.nn import nearest_neighbor
 

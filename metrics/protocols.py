@@ -32,20 +32,11 @@ from typing import Any, Literal
 import numpy as np
 
 from metrics._checks import as_cameras, check_int, check_positive
-from metrics.culling import (
-    MONOSDF_BLOCK_M,
-    block_resolution_for,
-    crop_mesh_to_bbox,
-    cull_mesh_to_frusta,
-    cull_mesh_to_visible,
-    gt_bounding_box,
-    render_depth_maps,
-    subdivide_mesh,
-    tsdf_refuse,
-    voxel_downsample,
-)
+from metrics.culling import crop_mesh_to_bbox, cull_mesh_to_frusta, cull_mesh_to_visible, gt_bounding_box, subdivide_mesh
 from metrics.mesh import MeshMetrics, check_pred_mesh, clean_mesh, point_metrics, sample_mesh_surface
 from metrics.nn import Backend, NearestNeighborIndex
+from metrics.render import render_depth_maps
+from metrics.tsdf import MONOSDF_BLOCK_M, block_resolution_for, tsdf_refuse, voxel_downsample
 
 
 def _nonempty(mesh: Any, what: str) -> Any:
@@ -224,7 +215,7 @@ def evaluate_mesh_scannet(
         downsample_voxel: voxel of the vertex downsampling, metres (0.02).
         tsdf_voxel, tsdf_trunc, depth_trunc: re-fusion parameters, metres (0.01, 0.03, 5.0).
         tsdf_block: width of the fusion's blocks, metres (MonoSDF: 16 voxels of 1 cm = 0.16); the voxels
-            per block side are :func:`metrics.culling.block_resolution_for` ``(tsdf_voxel, tsdf_block)``.
+            per block side are :func:`metrics.tsdf.block_resolution_for` ``(tsdf_voxel, tsdf_block)``.
         refuse_gt: also re-fuse the GT (restricts a complete synthetic GT to the observed surface).
         backend: nearest-neighbour backend.
         gt_index: the GT side prepared once (:func:`scannet_gt_points` indexed by
@@ -249,7 +240,7 @@ def evaluate_mesh_scannet(
 
 
 def _fusion_args(tsdf_voxel: float, tsdf_trunc: float, depth_trunc: float, tsdf_block: float) -> dict[str, Any]:
-    """:func:`metrics.culling.tsdf_refuse` keyword arguments of the ScanNet protocol (pred and GT alike)."""
+    """:func:`metrics.tsdf.tsdf_refuse` keyword arguments of the ScanNet protocol (pred and GT alike)."""
     return dict(voxel_size=tsdf_voxel, sdf_trunc=tsdf_trunc, depth_trunc=depth_trunc,
                 block_resolution=block_resolution_for(tsdf_voxel, tsdf_block))
 

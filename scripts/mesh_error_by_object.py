@@ -28,7 +28,7 @@ def main() -> None:
 
     from bench.data.datasets import load_dataset
     from bench.data.formats import load_scene
-    from metrics.culling import render_depth_maps
+    from metrics.render import render_depth_maps
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("mesh")

@@ -366,7 +366,7 @@ class MonoSDFTrainer:
             slots = np.unique(np.linspace(0, len(self.views) - 1, k).round().astype(int))
             mesh_depth = None
             if mesh is not None and len(mesh.faces):
-                from metrics.culling import render_depth_maps
+                from metrics.render import render_depth_maps
 
                 v = self.views[slots]
                 mesh_depth = render_depth_maps(mesh, self.scene.intrinsics[v], self.scene.cam_to_world[v], self.scene.height, self.scene.width)

@@ -7,21 +7,9 @@ import pytest
 import trimesh
 
 from bench.data.scene import InstanceInfo, Scene
+from metrics.camera import look_at
 
 N, H, W = 5, 24, 32
-
-
-def look_at(eye: np.ndarray, target: np.ndarray, up=(0.0, 0.0, 1.0)) -> np.ndarray:
-    """(4, 4) OpenCV cam_to_world (x right, y down, z forward) at ``eye`` looking at ``target``."""
-    z = target - eye
-    z = z / np.linalg.norm(z)
-    x = np.cross(z, np.asarray(up))
-    x = x / np.linalg.norm(x)
-    y = np.cross(z, x)
-    c2w = np.eye(4)
-    c2w[:3, :3] = np.stack([x, y, z], axis=1)
-    c2w[:3, 3] = eye
-    return c2w
 
 
 def unit_normals(rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:

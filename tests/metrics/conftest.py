@@ -6,21 +6,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from metrics.camera import look_at
 
 ASSETS = Path(__file__).resolve().parents[3] / "shared" / "assets" / "meshes"
-
-
-def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
-    """cam_to_world (4, 4), OpenCV axes (x right, y down, z forward)."""
-    eye, target, up = (np.asarray(a, dtype=np.float64) for a in (eye, target, up))
-    z = target - eye
-    z /= np.linalg.norm(z)
-    x = np.cross(z, up)
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    c2w = np.eye(4)
-    c2w[:3, 0], c2w[:3, 1], c2w[:3, 2], c2w[:3, 3] = x, y, z, eye
-    return c2w
 
 
 @pytest.fixture

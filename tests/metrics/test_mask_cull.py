@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from metrics.culling import render_depth_maps
+from metrics.render import render_depth_maps
 from metrics.mask_cull import cull_mesh_by_masks, dilate_masks, dilation_radius, vertices_kept
 
 

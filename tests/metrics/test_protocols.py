@@ -2,18 +2,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from metrics.culling import (
-    crop_mesh_to_bbox,
-    cull_mesh_to_frusta,
-    cull_mesh_to_visible,
-    gt_bounding_box,
-    points_in_frusta,
-    render_depth_maps,
-    _block_coords,
-    _touched_block_keys,
-    tsdf_refuse,
-    voxel_downsample,
-)
+from metrics.culling import crop_mesh_to_bbox, cull_mesh_to_frusta, cull_mesh_to_visible, gt_bounding_box, points_in_frusta
+from metrics.render import render_depth_maps
+from metrics.tsdf import _block_coords, _touched_block_keys, tsdf_refuse, voxel_downsample
 from metrics.dtu import DTUParams, dtu_chamfer, dtu_gt_points, radius_downsample, sample_mesh_dtu
 from metrics.mesh import EmptyReconstructionError
 from metrics.protocols import cull_replica_gt, evaluate_mesh_replica, evaluate_mesh_scannet, sample_replica_gt
@@ -202,7 +193,7 @@ def test_world_to_cam_matches_its_per_camera_twin(ring_cameras):
 def test_fusion_blocks_keep_monosdf_width_in_metres(ring_cameras):
     """MonoSDF's 16-voxel units of 1 cm are 16 cm wide: 16 voxels at 1 cm, 8 at 2 cm; the ScanNet
     protocol's re-fusion uses that block (same mesh as tsdf_refuse called with it)."""
-    from metrics.culling import block_resolution_for
+    from metrics.tsdf import block_resolution_for
 
     assert [block_resolution_for(v) for v in (0.01, 0.02, 0.015, 0.5)] == [16, 8, 11, 1]
     K, c2w, H, W = ring_cameras

@@ -16,7 +16,7 @@ from scipy import ndimage
 
 from bench.data.errors import BenchInputError
 from bench.data.scene import InstanceInfo, Scene
-from metrics.camera import pixel_rays
+from metrics.camera import look_at, pixel_rays
 from bench.data.synth.effects import (
     EFFECTS,
     PRIOR_PROFILES,
@@ -35,18 +35,6 @@ WALL_Y, WALL_TOP = 1.0, 1.1
 
 
 # ----------------------------------------------------------------------------- tiny ray caster
-def _look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
-    z = target - eye
-    z /= np.linalg.norm(z)
-    x = np.cross(z, [0.0, 0.0, 1.0])
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    m = np.eye(4)
-    m[:3, :3] = np.stack([x, y, z], axis=1)
-    m[:3, 3] = eye
-    return m
-
-
 def _cast(o: np.ndarray, d: np.ndarray):
     """o (3,), d (P, 3) world rays; returns t (P,), normal (P, 3), id (P,)."""
     p = d.shape[0]
@@ -111,7 +99,7 @@ def _build_scene() -> Scene:
     for i in range(n_views):
         az = np.deg2rad(-20.0 + 25.0 * i)
         eye = np.array([1.9 * np.sin(az), -1.9 * np.cos(az), 1.0])
-        m = _look_at(eye, np.array([0.0, 0.1, 0.45]))
+        m = look_at(eye, np.array([0.0, 0.1, 0.45]))
         d_world = dirs_cam @ m[:3, :3].T
         t, n_world, iid = _cast(eye, d_world)
         valid = np.isfinite(t)

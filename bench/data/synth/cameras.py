@@ -8,21 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-WORLD_UP = np.array([0.0, 0.0, 1.0])
-
-
-def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = WORLD_UP) -> np.ndarray:
-    """Camera-to-world pose at ``eye`` looking at ``target`` (OpenCV axes: columns right, down, forward)."""
-    f = target - eye
-    f = f / np.linalg.norm(f)
-    r = np.cross(f, up)
-    if np.linalg.norm(r) < 1e-8:  # looking straight up/down: pick any right vector
-        r = np.cross(f, np.array([1.0, 0.0, 0.0]))
-    r = r / np.linalg.norm(r)
-    d = np.cross(f, r)
-    pose = np.eye(4)
-    pose[:3, 0], pose[:3, 1], pose[:3, 2], pose[:3, 3] = r, d, f, eye
-    return pose
+from metrics.camera import look_at
 
 
 def intrinsics(width: int, height: int, hfov_deg: float) -> np.ndarray:

@@ -16,7 +16,7 @@ import numpy as np
 
 from bench.data.errors import BenchInputError
 from methods.base import Artifacts, Snapshot
-from metrics.culling import block_resolution_for, tsdf_refuse
+from metrics.tsdf import block_resolution_for, tsdf_refuse
 
 
 class MetricPriorTSDF:
