@@ -11,8 +11,8 @@ Per row (all runs of one table row in one column group): every run flat and with
 seed spread of the final value (sample std over seeds of the per-seed mean over scenes, the table's
 ``±``) at most ``seed_std``. With one seed the spread is unknown and only the per-run checks decide.
 
-Only optimised rows are judged: a job counts as trained when its resolved config has an ``iterations``
-key (an optimisation schedule). Fusion references (the oracle's snapshots count views fused) have none.
+Only optimised rows are judged: a job counts as trained when its resolved config sets ``iterations``
+(an optimisation schedule; :func:`bench.jobs.is_trained`, which the runner's "training first" order uses too). Fusion references (the oracle's snapshots count views fused) have none.
 Used by :mod:`bench.report` (tables and claims) and :mod:`bench.study` (``bench study convergence``).
 """
 
@@ -23,6 +23,8 @@ from dataclasses import dataclass
 from typing import Any, Iterable, Sequence
 
 import numpy as np
+
+from bench.jobs import is_trained
 
 
 @dataclass(frozen=True)
@@ -115,11 +117,6 @@ def _number(x: Any) -> float:
         return math.nan if x is None or isinstance(x, bool) else float(x)
     except (TypeError, ValueError):
         return math.nan
-
-
-def is_trained(config: Any) -> bool:
-    """A job is judged when its resolved config has an optimisation schedule (an ``iterations`` key)."""
-    return isinstance(config, dict) and "iterations" in config
 
 
 def judge_row(runs: Iterable[tuple[int, Sequence[dict[str, Any]], Any]], spec: ConvergenceSpec) -> RowConvergence:

@@ -63,6 +63,12 @@ class Job:
             object.__setattr__(self, "base_id", self.job_id)  # frozen dataclass
 
 
+def is_trained(config: Any) -> bool:
+    """True if a job's resolved config sets an optimisation schedule (a non-zero ``iterations``); fusion
+    references (the oracle) have none."""
+    return isinstance(config, dict) and bool(config.get("iterations"))
+
+
 def result_path(out_dir: Path, job: Job) -> Path:
     return Path(out_dir) / "jobs" / f"{job.job_id}.json"
 

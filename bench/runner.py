@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any, Callable
 from bench import __version__
 from bench.data.atomic import atomic_write_json
 from bench.data.datasets import DEFAULT_CACHE, scene_hash
-from bench.jobs import WORKER_LOST, Job, JobPlan, result_path
+from bench.jobs import WORKER_LOST, Job, JobPlan, is_trained, result_path
 from methods.registry import available_methods, method_config
 
 if TYPE_CHECKING:
@@ -89,7 +89,7 @@ def training_first(jobs: list[Job]) -> list[Job]:
     fusion-only jobs, 5-10 s each), otherwise in plan order: the short jobs then fill the last minutes
     instead of one long job running alone at the end (measured: the dense table ended with a 25 s tail
     on one worker when its 12 oracle jobs ran first)."""
-    return sorted(jobs, key=lambda j: 0 if j.config.get("iterations") else 1)
+    return sorted(jobs, key=lambda j: 0 if is_trained(j.config) else 1)
 
 
 def needs_run(path: Path, force: bool = False) -> bool:
