@@ -22,7 +22,7 @@ import os
 import shutil
 import uuid
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -49,7 +49,7 @@ def _mesh_bytes(mesh: Any, budget_bytes: float) -> tuple[bytes, str]:
     m = m.simplify_quadric_decimation(target)
     small = trimesh.Trimesh(np.asarray(m.vertices), np.asarray(m.triangles), process=False)
     note = f"mesh.ply decimated from {len(mesh.faces)} to {len(small.faces)} faces to fit the {budget_bytes / 1e6:.1f} MB budget\n"
-    return small.export(file_type="ply", encoding="binary"), note
+    return cast(bytes, small.export(file_type="ply", encoding="binary")), note
 
 
 def write_job_artifacts(artifacts: Any, scene: Any, folder: Path, budget_mb: float = BUDGET_MB) -> list[str]:

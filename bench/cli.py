@@ -95,7 +95,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     runs once and counts in each), then write each table's outputs; with several tables also one
     ``report.md`` assembling them."""
     from bench.pipeline import load_tables, plan_table
-    from bench.report import build_table, collect_results, render_report, write_table_outputs
+    from bench.report import build_table, render_report, write_table_outputs
+    from bench.results_io import collect_results
     from bench.runner import plan_index, run_jobs, unique_jobs
     from methods.registry import available_methods
 
@@ -217,7 +218,8 @@ def cmd_regress(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     from bench.pipeline import load_tables, plan_table
-    from bench.report import collect_results, render_report
+    from bench.report import render_report
+    from bench.results_io import collect_results
     from bench.runner import plan_index
     from methods.registry import available_methods
 

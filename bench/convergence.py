@@ -13,7 +13,7 @@ seed spread of the final value (sample std over seeds of the per-seed mean over 
 
 Only optimised rows are judged: a job counts as trained when its resolved config sets ``iterations``
 (an optimisation schedule; :func:`bench.jobs.is_trained`, which the runner's "training first" order uses too). Fusion references (the oracle's snapshots count views fused) have none.
-Used by :mod:`bench.report` (tables and claims) and :mod:`bench.study` (``bench study convergence``).
+Used by :mod:`bench.aggregate` (the verdict per row), :mod:`bench.claims` and :mod:`bench.study` (``bench study convergence``).
 """
 
 from __future__ import annotations
@@ -51,7 +51,7 @@ class RunCheck:
     max_drop: float
 
 
-def check_run(fractions: Sequence[float], values: Sequence[float], spec: ConvergenceSpec) -> RunCheck:
+def check_run(fractions: Sequence[float] | np.ndarray, values: Sequence[float] | np.ndarray, spec: ConvergenceSpec) -> RunCheck:
     """The per-run checks on one curve (any order; NaN = a snapshot without that metric).
 
     A run whose final value is missing passes neither check; a NaN neighbour skips that drop."""

@@ -8,23 +8,96 @@ Metric keys produced (the table specs' column keys): ``acc``, ``comp``, ``cd`` (
 from __future__ import annotations
 
 from collections import OrderedDict
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Annotated, Any, Callable, Literal
 
 import numpy as np
 import yaml
 
+from bench.data.config import Range, config_record, load_config
 from bench.data.errors import BenchInputError
 from bench.data.scene import Scene
 from methods.base import Snapshot
 
 PROTOCOLS_FILE = Path(__file__).resolve().parent.parent / "configs" / "protocols.yaml"
-SUPPORTED_PROTOCOLS = ("scannet", "replica", "dtu", "llff")
 MESH_KEYS = {"accuracy": "acc", "completion": "comp", "chamfer": "cd", "precision": "prec", "recall": "recall", "fscore": "fscore", "normal_consistency": "nc"}
+Positive = Range(lo=0, lo_open=True)
 
 
-def protocol_params(protocol: str, scale: str, path: Path = PROTOCOLS_FILE) -> dict[str, Any]:
-    """Parameters of ``protocol`` at ``scale``: ``defaults`` updated by ``scales[scale]``."""
+@dataclass(frozen=True)
+class ScanNetParams:
+    """MonoSDF's ScanNet evaluation (metres): F-score ``threshold``, the re-fusion of the prediction
+    (``tsdf_voxel`` / ``tsdf_trunc`` / ``depth_trunc`` / ``tsdf_block``) and the down-sampling voxel."""
+
+    threshold: Annotated[float, Positive]
+    downsample_voxel: Annotated[float, Positive]
+    tsdf_voxel: Annotated[float, Positive]
+    tsdf_trunc: Annotated[float, Positive]
+    depth_trunc: Annotated[float, Positive]
+    tsdf_block: Annotated[float, Positive]
+
+
+@dataclass(frozen=True)
+class ReplicaParams:
+    """MonoSDF's Replica evaluation: ``n_samples`` surface samples, ``threshold`` (m), GT box scale."""
+
+    n_samples: Annotated[int, Range(lo=1)]
+    threshold: Annotated[float, Positive]
+    bbox_scale: Annotated[float, Positive]
+
+
+@dataclass(frozen=True)
+class DTUProtocolParams:
+    """The DTU evaluation: lengths scaled from DTU's ``dtu_width_px`` images, the ground-plane offset,
+    and the optional MonoSDF mask culling (``cull``: none | monosdf; docs/metrics.md)."""
+
+    dtu_width_px: Annotated[int, Range(lo=1)]
+    ground_offset_frac: Annotated[float, Range(lo=0)]
+    cull: Literal["none", "monosdf"]
+
+
+@dataclass(frozen=True)
+class LLFFParams:
+    """The LLFF image evaluation: SSIM border convention (zero = FSGS's zero-padded window; valid)."""
+
+    ssim_padding: Literal["zero", "valid"]
+
+
+@dataclass(frozen=True)
+class Protocol:
+    """An evaluation protocol: its typed parameters (values in ``configs/protocols.yaml``, per scale) and
+    ``evaluate(snapshot, scene, params, seed) -> {metric key: value}``."""
+
+    name: str
+    params_type: type
+    evaluate: Callable[[Snapshot, Scene, Any, int], dict[str, float]]
+
+
+PROTOCOL_REGISTRY: dict[str, Protocol] = {}
+
+
+def register_protocol(name: str, params_type: type) -> Callable[[Callable], Callable]:
+    """Decorator: ``@register_protocol("scannet", ScanNetParams)`` on the evaluation function."""
+
+    def deco(fn: Callable) -> Callable:
+        if name in PROTOCOL_REGISTRY:
+            raise ValueError(f"protocol {name!r} registered twice")
+        PROTOCOL_REGISTRY[name] = Protocol(name, params_type, fn)
+        return fn
+
+    return deco
+
+
+def get_protocol(name: str) -> Protocol:
+    if name not in PROTOCOL_REGISTRY:
+        raise BenchInputError(f"protocol {name!r}", f"not supported by the evaluator (available: {sorted(PROTOCOL_REGISTRY)})")
+    return PROTOCOL_REGISTRY[name]
+
+
+def protocol_params(protocol: str, scale: str, path: Path = PROTOCOLS_FILE) -> Any:
+    """Typed parameters of ``protocol`` at ``scale``: the file's ``defaults`` updated by ``scales[scale]``
+    (unknown keys, wrong types and out-of-range values are errors naming the file)."""
     data = yaml.safe_load(path.read_text()) or {}
     if protocol not in data:
         raise BenchInputError(path, f"no parameters for protocol {protocol!r}")
@@ -32,7 +105,8 @@ def protocol_params(protocol: str, scale: str, path: Path = PROTOCOLS_FILE) -> d
     scales = entry.get("scales") or {}
     if scale not in scales:
         raise BenchInputError(path, f"protocol {protocol!r} has no scale {scale!r} (has {sorted(scales)})")
-    return {**(entry.get("defaults") or {}), **(scales[scale] or {})}
+    values = {**(entry.get("defaults") or {}), **(scales[scale] or {})}
+    return load_config(get_protocol(protocol).params_type, values, f"{path} ({protocol}, scale {scale!r})")
 
 
 def _mesh_metrics(result: Any) -> dict[str, float]:
@@ -45,7 +119,7 @@ _GT_CACHE: "OrderedDict[tuple, Any]" = OrderedDict()  # GT-side work per scene, 
 _GT_CACHE_SIZE = 16
 
 
-def _cached_gt(protocol: str, scene: Scene, params: dict[str, Any], extra: tuple, compute: Callable[[], Any]) -> Any:
+def _cached_gt(protocol: str, scene: Scene, params: Any, extra: tuple, compute: Callable[[], Any]) -> Any:
     """``compute()`` once per (protocol, scene, parameters, ``extra``): the GT side of an evaluation,
     reused by every snapshot of a job and by the later jobs of the same scene in this process.
 
@@ -54,7 +128,7 @@ def _cached_gt(protocol: str, scene: Scene, params: dict[str, Any], extra: tuple
     table's small scale needs 10 per worker (2 ScanNet + 2 x (1 + 3) Replica): a worker runs the table
     row by row, cycling through every scene, and a smaller cache recomputed the GT of each scene once per
     row (measured ~20 s per worker over the table)."""
-    key = (protocol, str(scene.root or scene.name), tuple(sorted(params.items())), extra)
+    key = (protocol, str(scene.root or scene.name), params, extra)  # params: a frozen (hashable) dataclass
     if key in _GT_CACHE:
         _GT_CACHE.move_to_end(key)
         return _GT_CACHE[key]
@@ -65,28 +139,27 @@ def _cached_gt(protocol: str, scene: Scene, params: dict[str, Any], extra: tuple
     return value
 
 
-def _scannet_gt(scene: Scene, views: np.ndarray, params: dict[str, Any]) -> Any:
+def _scannet_gt(scene: Scene, views: np.ndarray, params: ScanNetParams) -> Any:
     """The ScanNet GT side once per scene: the re-fused GT's downsampled vertices and their
     nearest-neighbour index (:class:`metrics.nn.NearestNeighborIndex`)."""
     from metrics.nn import NearestNeighborIndex
     from metrics.protocols import scannet_gt_points
 
     cams = (scene.intrinsics[views], scene.cam_to_world[views], scene.height, scene.width)
-    keys = ("downsample_voxel", "tsdf_voxel", "tsdf_trunc", "depth_trunc", "tsdf_block")
     return _cached_gt("scannet", scene, params, tuple(int(v) for v in views), lambda: NearestNeighborIndex(
-        scannet_gt_points(scene.load_gt_mesh(), *cams, **{k: params[k] for k in keys if k in params})))
+        scannet_gt_points(scene.load_gt_mesh(), *cams, downsample_voxel=params.downsample_voxel, tsdf_voxel=params.tsdf_voxel,
+                          tsdf_trunc=params.tsdf_trunc, depth_trunc=params.depth_trunc, tsdf_block=params.tsdf_block)))
 
 
-def _replica_gt(scene: Scene, views: np.ndarray, params: dict[str, Any], seed: int) -> Any:
+def _replica_gt(scene: Scene, views: np.ndarray, params: ReplicaParams, seed: int) -> Any:
     """The Replica GT side: the culled GT surface once per scene (seed-independent: ~4 s at one thread),
     its samples once per seed."""
     from metrics.protocols import cull_replica_gt, sample_replica_gt
 
     cams = tuple(int(v) for v in views)
-    cull_params = {k: v for k, v in params.items() if k not in ("threshold", "n_samples")}
     surface = _cached_gt("replica", scene, params, (cams,), lambda: cull_replica_gt(
-        scene.load_gt_mesh(), scene.intrinsics[views], scene.cam_to_world[views], scene.height, scene.width, **cull_params))
-    return _cached_gt("replica", scene, params, (cams, seed), lambda: sample_replica_gt(surface, int(params.get("n_samples", 200_000)), seed))
+        scene.load_gt_mesh(), scene.intrinsics[views], scene.cam_to_world[views], scene.height, scene.width, bbox_scale=params.bbox_scale))
+    return _cached_gt("replica", scene, params, (cams, seed), lambda: sample_replica_gt(surface, params.n_samples, seed))
 
 
 def _crop_to_box(mesh: Any, lo: np.ndarray, hi: np.ndarray) -> Any:
@@ -104,7 +177,7 @@ def _crop_to_box(mesh: Any, lo: np.ndarray, hi: np.ndarray) -> Any:
     return trimesh.Trimesh(v, f, process=False)
 
 
-def dtu_setup(scene: Scene, params: dict[str, Any], seed: int) -> dict[str, Any]:
+def dtu_setup(scene: Scene, params: DTUProtocolParams, seed: int) -> dict[str, Any]:
     """The GT side of the DTU protocol for a DTU-like synthetic scene (cached per scene):
 
     * lengths: :meth:`metrics.dtu.DTUParams.scaled` from the object's largest extent (the scene's
@@ -128,23 +201,20 @@ def dtu_setup(scene: Scene, params: dict[str, Any], seed: int) -> dict[str, Any]
         raise BenchInputError(where, "the DTU protocol needs metadata.layout.object_bounds_m and ground_plane "
                               "(written by `bench scenes make` for object scenes)")
     bounds = np.asarray(layout["object_bounds_m"], dtype=np.float64)
-    dtu = DTUParams.scaled(float((bounds[1] - bounds[0]).max()), image_downscale=float(params["dtu_width_px"]) / scene.width)
+    dtu = DTUParams.scaled(float((bounds[1] - bounds[0]).max()), image_downscale=float(params.dtu_width_px) / scene.width)
     views = scene.view_indices("eval_only") if "eval_only" in scene.splits else np.arange(scene.num_views)
     K, c2w = scene.intrinsics[views], scene.cam_to_world[views]
     bbox = np.stack([bounds[0] - dtu.patch, bounds[1] + dtu.patch])
     gt_mesh = scene.load_gt_mesh()
     region = _crop_to_box(gt_mesh, bbox[0] - dtu.patch, bbox[1] + 2 * dtu.patch)
-    cull = str(params.get("cull", "none"))
-    if cull not in ("none", "monosdf"):
-        raise BenchInputError(PROTOCOLS_FILE, f"dtu.cull must be 'none' or 'monosdf', got {cull!r}")
     cull_masks = None
-    if cull == "monosdf":
+    if params.cull == "monosdf":
         from bench.data.formats.dtu import object_masks
         from metrics.mask_cull import dilate_masks, dilation_radius
 
         cull_masks = dilate_masks(object_masks(scene), dilation_radius(scene.width))
     plane = np.asarray(layout["ground_plane"], dtype=np.float64).copy()
-    plane[3] -= float(params["ground_offset_frac"]) * dtu.max_dist * np.linalg.norm(plane[:3])
+    plane[3] -= params.ground_offset_frac * dtu.max_dist * np.linalg.norm(plane[:3])
     return {
         "params": dtu, "bbox": bbox, "plane": plane, "K": K, "c2w": c2w,
         "gt_points": dtu_gt_points(region, K, c2w, scene.height, scene.width, dtu, seed=seed),
@@ -153,49 +223,70 @@ def dtu_setup(scene: Scene, params: dict[str, Any], seed: int) -> dict[str, Any]
     }
 
 
+@register_protocol("scannet", ScanNetParams)
+def evaluate_scannet(snapshot: Snapshot, scene: Scene, params: ScanNetParams, seed: int) -> dict[str, float]:
+    """MonoSDF's ScanNet protocol on the training views: re-fused prediction vs re-fused GT."""
+    from metrics.protocols import evaluate_mesh_scannet
+
+    views = scene.view_indices("train")
+    cams = (scene.intrinsics[views], scene.cam_to_world[views], scene.height, scene.width)
+    gt_index = _scannet_gt(scene, views, params)
+    return _mesh_metrics(evaluate_mesh_scannet(snapshot.mesh, None, *cams, gt_index=gt_index, **config_record(params)))
+
+
+@register_protocol("replica", ReplicaParams)
+def evaluate_replica(snapshot: Snapshot, scene: Scene, params: ReplicaParams, seed: int) -> dict[str, float]:
+    """MonoSDF's Replica protocol: culled GT surface, ``n_samples`` samples (seeded), normal consistency."""
+    from metrics.protocols import evaluate_mesh_replica
+
+    views = scene.view_indices("train")
+    cams = (scene.intrinsics[views], scene.cam_to_world[views], scene.height, scene.width)
+    prepared = _replica_gt(scene, views, params, seed)
+    return _mesh_metrics(evaluate_mesh_replica(snapshot.mesh, None, *cams, seed=seed, prepared_gt=prepared, **config_record(params)))
+
+
+@register_protocol("dtu", DTUProtocolParams)
+def evaluate_dtu(snapshot: Snapshot, scene: Scene, params: DTUProtocolParams, seed: int) -> dict[str, float]:
+    """The DTU Chamfer (:func:`dtu_setup`; MonoSDF's mask culling first when ``cull: monosdf``)."""
+    from metrics.dtu import dtu_chamfer
+
+    d = _cached_gt("dtu", scene, params, (seed,), lambda: dtu_setup(scene, params, seed))
+    mesh = snapshot.mesh
+    if d["cull_masks"] is not None:  # MonoSDF's cull_scan: every view's dilated object mask (metrics/mask_cull.py)
+        from metrics.mask_cull import cull_mesh_by_masks
+
+        mesh = cull_mesh_by_masks(mesh, d["cull_masks"], scene.intrinsics, scene.cam_to_world, radius=None)
+    r = dtu_chamfer(mesh, d["gt_points"], d["K"], d["c2w"], scene.height, scene.width, d["params"],
+                    gt_depth_maps=d["depth"], bbox=d["bbox"], ground_plane=d["plane"], seed=seed)
+    out = {"cd": r.chamfer, "acc": r.d2s, "comp": r.s2d}
+    return {k: float(v) for k, v in out.items() if np.isfinite(v)}
+
+
+@register_protocol("llff", LLFFParams)
+def evaluate_llff(snapshot: Snapshot, scene: Scene, params: LLFFParams, seed: int) -> dict[str, float]:
+    """PSNR and SSIM of the test-view renders (FSGS's split)."""
+    from metrics.image import psnr, ssim
+
+    test = scene.view_indices("test")
+    return {"psnr": float(psnr(snapshot.renders, scene.images[test]).mean),
+            "ssim": float(ssim(snapshot.renders, scene.images[test], padding=params.ssim_padding).mean)}
+
+
+SUPPORTED_PROTOCOLS = tuple(PROTOCOL_REGISTRY)
+
+
 def evaluate_snapshot(snapshot: Snapshot, scene: Scene, protocol: str, scale: str, seed: int = 0) -> dict[str, float]:
-    """Metrics of one snapshot.
+    """Metrics of one snapshot under a registered protocol.
 
     Args:
         snapshot: method output (mesh for ``scannet`` / ``replica`` / ``dtu``, renders for ``llff``).
         scene: the evaluated scene (GT mesh, cameras).
-        protocol: ``scannet`` | ``replica`` | ``dtu`` | ``llff``.
+        protocol: a name of :data:`PROTOCOL_REGISTRY` (``scannet`` | ``replica`` | ``dtu`` | ``llff``).
         scale: selects the protocol parameters (``configs/protocols.yaml``).
-        seed: seed of the point sampling in the Replica protocol.
+        seed: seed of the point sampling (Replica, DTU).
 
     Returns:
         ``{metric key: value}``.
     """
-    if protocol in ("scannet", "replica"):
-        from metrics.protocols import evaluate_mesh_replica, evaluate_mesh_scannet
-
-        params = protocol_params(protocol, scale)
-        views = scene.view_indices("train")
-        cams = (scene.intrinsics[views], scene.cam_to_world[views], scene.height, scene.width)
-        if protocol == "scannet":
-            gt_index = _scannet_gt(scene, views, params)
-            return _mesh_metrics(evaluate_mesh_scannet(snapshot.mesh, None, *cams, gt_index=gt_index, **params))
-        prepared = _replica_gt(scene, views, params, seed)
-        return _mesh_metrics(evaluate_mesh_replica(snapshot.mesh, None, *cams, seed=seed, prepared_gt=prepared, **params))
-    if protocol == "dtu":
-        from metrics.dtu import dtu_chamfer
-
-        params = protocol_params(protocol, scale)
-        d = _cached_gt("dtu", scene, params, (seed,), lambda: dtu_setup(scene, params, seed))
-        mesh = snapshot.mesh
-        if d["cull_masks"] is not None:  # MonoSDF's cull_scan: every view's dilated object mask (metrics/mask_cull.py)
-            from metrics.mask_cull import cull_mesh_by_masks
-
-            mesh = cull_mesh_by_masks(mesh, d["cull_masks"], scene.intrinsics, scene.cam_to_world, radius=None)
-        r = dtu_chamfer(mesh, d["gt_points"], d["K"], d["c2w"], scene.height, scene.width, d["params"],
-                        gt_depth_maps=d["depth"], bbox=d["bbox"], ground_plane=d["plane"], seed=seed)
-        out = {"cd": r.chamfer, "acc": r.d2s, "comp": r.s2d}
-        return {k: float(v) for k, v in out.items() if np.isfinite(v)}
-    if protocol == "llff":
-        from metrics.image import psnr, ssim
-
-        params = protocol_params(protocol, scale)
-        test = scene.view_indices("test")
-        return {"psnr": float(psnr(snapshot.renders, scene.images[test]).mean),
-                "ssim": float(ssim(snapshot.renders, scene.images[test], padding=str(params["ssim_padding"])).mean)}
-    raise BenchInputError(f"protocol {protocol!r}", f"not supported by the evaluator yet {SUPPORTED_PROTOCOLS}")
+    entry = get_protocol(protocol)
+    return entry.evaluate(snapshot, scene, protocol_params(protocol, scale), seed)

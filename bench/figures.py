@@ -1,4 +1,8 @@
-"""Report figures drawn from the per-job artifacts (:mod:`bench.artifacts`).
+"""Report figures: the accuracy-vs-time plot from the result rows, and figures drawn from the per-job
+artifacts (:mod:`bench.artifacts`).
+
+:func:`plot_accuracy_vs_time`: a table's main metric against wall seconds, one curve per row (the mean
+along the schedule, :func:`bench.aggregate.curve_table`, and the mean final point), one panel per group.
 
 :func:`reconstruction_figure`: for every geometry group of a table, one scene (its first) and one seed
 (the smallest), every measured row's final mesh ray-cast from 2 fixed training cameras, each pixel
@@ -23,7 +27,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pandas as pd
 
+from bench.aggregate import curve_table
+from bench.table_report import TableReport
 from metrics.camera import backproject
 
 VMAX_M = 0.10  # colour scale of the distance to GT (m): the F-score threshold is 5 cm
@@ -67,7 +74,7 @@ def shaded_image(mesh: Any, K: np.ndarray, c2w: np.ndarray, h: int, w: int) -> n
 
 
 def reconstruction_figure(report: Any, out_dir: Path, cache_dir: Path | None = None) -> bytes | None:
-    """PNG (see the module docstring) for ``report`` (a :class:`bench.report.TableReport`) from the meshes
+    """PNG (see the module docstring) for ``report`` (a :class:`bench.table_report.TableReport`) from the meshes
     under ``out_dir/artifacts``; None when no row of a geometry group has a kept mesh."""
     import matplotlib
 
@@ -121,7 +128,7 @@ def _first_jobs(report: Any, out_dir: Path, want: str, protocols: tuple[str, ...
     """Per group (optionally of these protocols): (group, first scene, smallest seed, [(row label,
     artifact file ``want``)]) for the rows whose job kept that file."""
     jobs = report.jobs
-    out = []
+    out: list[tuple[Any, str, int, list[tuple[str, Path]]]] = []
     if jobs is None or not len(jobs):
         return out
     for g in report.spec.groups:
@@ -223,7 +230,7 @@ def renders_figure(report: Any, out_dir: Path, cache_dir: Path | None = None) ->
             renders = np.load(path).astype(np.float32)
             depths = np.load(path.with_name("depths.npy")).astype(np.float32) if path.with_name("depths.npy").is_file() else None
             pick = np.linspace(0, len(renders) - 1, min(2, len(renders))).round().astype(int)
-            row = []
+            row: list[tuple[np.ndarray, str, dict[str, Any]]] = []
             for i in pick:
                 v = int(test[i])
                 row += [(np.clip(renders[i], 0, 1), f"render, test view {v}", {}), (scene.images[v], "GT", {})]
@@ -237,3 +244,53 @@ def renders_figure(report: Any, out_dir: Path, cache_dir: Path | None = None) ->
             cells.append(row)
             labels.append(f"{g.label}: {label}")
     return grid_png(cells, labels) if cells else None
+
+
+def _curves(report: TableReport, curves: pd.DataFrame, gid: str, key: str) -> dict[str, tuple[list[float], list[float], tuple[float, float] | None]]:
+    """Per row: mean (seconds, metric) per curve fraction (from ``curves``, :func:`curve_table`), and the
+    mean final (total s, metric) point."""
+    out = {}
+    curves = curves[(curves["group"] == gid) & (curves["metric"] == key)].sort_values("fraction")
+    ok = report.jobs[(report.jobs["status"] == "ok") & (report.jobs["gid"] == gid)]
+    for label, sub in ok.groupby("row", sort=False):
+        c = curves[curves["row"] == str(label)]
+        total = pd.to_numeric(sub["timings"].map(lambda t: t.get("total")), errors="coerce")
+        final = pd.to_numeric(sub["metrics"].map(lambda m: m.get(key)), errors="coerce")
+        both = pd.DataFrame({"t": total, "v": final}).dropna()
+        end = (float(both["t"].mean()), float(both["v"].mean())) if len(both) else None
+        out[str(label)] = (c["seconds"].tolist(), c["mean"].tolist(), end)
+    order = [r.label for r in report.spec.rows]
+    return dict(sorted(out.items(), key=lambda kv: order.index(kv[0]) if kv[0] in order else len(order)))
+
+
+def plot_accuracy_vs_time(report: TableReport, curves: pd.DataFrame | None = None) -> bytes:
+    """PNG bytes: the main metric against wall seconds, one curve per row, one panel per group
+    (``curves``: :func:`curve_table` of ``report`` when the caller has it already)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    _, main = report.spec.main_metric()
+    groups = [g for g in report.spec.groups if g.column(main.key) is not None and not g.column(main.key).paper_only]  # type: ignore[union-attr]
+    curves = curve_table(report) if curves is None else curves
+    colours = {r.label: f"C{k % 10}" for k, r in enumerate(report.spec.rows)}  # one colour per row in every panel
+    fig = Figure(figsize=(5.0 * len(groups), 3.8))
+    FigureCanvasAgg(fig)
+    for i, g in enumerate(groups):
+        ax = fig.add_subplot(1, len(groups), i + 1)
+        for label, (xs, ys, end) in _curves(report, curves, g.id, main.key).items():
+            line = ax.plot(xs, ys, marker=".", label=label, color=colours.get(label))[0] if xs else None
+            if end is not None:
+                ax.plot([end[0]], [end[1]], marker="o", linestyle="", color=colours.get(label),
+                        label=None if line else label)
+        ax.set_xlabel("wall time [s]")
+        ax.set_ylabel(f"{main.label} ({'higher' if main.direction == 'higher' else 'lower'} is better)")
+        ax.set_title(f"{g.label}: {main.label} vs time ({report.scale})", fontsize=9)
+        ax.grid(alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7)
+        else:
+            ax.text(0.5, 0.5, "no finished jobs yet", ha="center", va="center", transform=ax.transAxes)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100)
+    return buf.getvalue()

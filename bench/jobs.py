@@ -25,7 +25,7 @@ from bench import __version__
 
 RESULT_SCHEMA = 1
 REQUIRED_FIELDS = ("job_id", "table", "row", "method", "scene", "dataset", "seed", "scale", "status")
-"""Fields a stored result row must have to be read back (:func:`bench.report.collect_results`)."""
+"""Fields a stored result row must have to be read back (:func:`bench.results_io.collect_results`)."""
 WORKER_LOST = "WorkerLost"
 """``error.type`` of a job whose worker process died (not the job's own error: a rerun tries again)."""
 

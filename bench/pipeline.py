@@ -1,5 +1,9 @@
 """Plan -> run -> collect: the steps ``bench run``, ``bench report`` and ``bench regress`` share.
 
+A table spec (:mod:`bench.table_spec`) becomes job plans (:func:`plan_jobs`: rows x groups x scenes x
+seeds), filtered by the CLI's options (:func:`select_plans`) and resolved into runnable jobs with ids
+(:func:`plan_table`).
+
 Paths are arguments (``tables_dir``: where table names resolve, default :data:`SHIPPED_TABLES`), never
 module state a caller has to patch. Executors are the caller's (the CLI builds one from its flags).
 """
@@ -13,7 +17,7 @@ from typing import Sequence
 from bench.data.errors import BenchInputError
 from bench.jobs import Job, JobPlan
 from bench.runner import resolve_jobs
-from bench.tables import TableSpec, list_tables, load_table_spec, plan_jobs
+from bench.table_spec import TableSpec, list_tables, load_table_spec, resolve
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 SHIPPED_TABLES = REPO_ROOT / "configs" / "tables"
@@ -37,6 +41,24 @@ def load_tables(names: Sequence[str], tables_dir: Path = SHIPPED_TABLES) -> list
     if list(names) == ["all"]:
         names = list_tables(tables_dir)
     return [load_table_spec(table_path(n, tables_dir)) for n in names]
+
+
+def plan_jobs(spec: TableSpec, scale: str) -> list[JobPlan]:
+    """Every job the table expects at ``scale``: measured rows x groups x scenes x seeds.
+
+    The job's overrides are the group's overrides updated by the row's (the row wins on a clash).
+    """
+    res = resolve(spec, scale)
+    jobs: list[JobPlan] = []
+    for row in spec.rows:
+        assert row.method is not None
+        for g in spec.groups:
+            overrides = {**g.overrides, **row.overrides}
+            for scene in res.scenes[g.id]:
+                for seed in res.seeds:
+                    jobs.append(JobPlan(spec.name, row.label, row.method, overrides, g.id, g.dataset,
+                                        g.protocol, scene, seed, scale, g.effects))
+    return jobs
 
 
 def select_plans(spec: TableSpec, plans: list[JobPlan], rows: Sequence[str] | None, scenes: Sequence[str] | None,

@@ -49,7 +49,7 @@ from bench.data.errors import BenchInputError
 from bench.executors.base import Executor
 from bench.jobs import versions
 from bench.pipeline import SHIPPED_TABLES, load_tables, plan_table
-from bench.tables import TableSpec
+from bench.table_spec import TableSpec
 
 REFERENCE_SCHEMA = 1
 DEFAULT_K = 3.0
@@ -109,7 +109,7 @@ def floor_for(metric: str, unit: str) -> float:
 
 
 def summarise(spec: TableSpec, report, rows: Iterable[str] | None = None) -> dict[str, Any]:
-    """Per row x group x measured column of ``report`` (a :class:`bench.report.TableReport`):
+    """Per row x group x measured column of ``report`` (a :class:`bench.table_report.TableReport`):
     mean, std, n, n_expected, n_failed, status, direction, unit. Rows of methods that are not
     implemented (and have no results), rows outside ``rows`` (when given) and metrics a method does not
     report are left out."""
@@ -119,7 +119,7 @@ def summarise(spec: TableSpec, report, rows: Iterable[str] | None = None) -> dic
         if keep is not None and r.label not in keep:
             continue
         for g in spec.groups:
-            tracked = [(c.key, c.direction, c.unit) for c in g.columns if not c.paper_only]
+            tracked: list[tuple[str, str | None, str]] = [(c.key, c.direction, c.unit) for c in g.columns if not c.paper_only]
             tracked += [(key, None, "") for key in g.extra_metrics]  # presence only (no direction)
             for key, direction, unit in tracked:
                 cell = report.cells.get((r.label, g.id, key))
@@ -250,7 +250,8 @@ def load_reference(path: Path) -> dict[str, Any]:
 def run_regress(args: argparse.Namespace, executor: Executor, tables_dir: Path = SHIPPED_TABLES) -> int:
     """``bench regress``: fresh run(s) on ``executor``, comparison or reference update, report; returns
     the exit code. ``args``: the CLI's (``table``, ``scale``, ``out``, ``reference_dir``, ...)."""
-    from bench.report import build_table, collect_results, write_table_outputs
+    from bench.report import build_table, write_table_outputs
+    from bench.results_io import collect_results
     from bench.runner import plan_index, run_jobs
     from methods.registry import available_methods
 
@@ -287,6 +288,7 @@ def run_regress(args: argparse.Namespace, executor: Executor, tables_dir: Path =
                 print(f"  (against the previous reference: {len(changed)} cell(s) changed beyond tolerance or new)")
             continue
         pending_rows = sorted({p.row for p in pending} | ({r.label for r in spec.rows} - set(rows) if rows else set()))
+        assert reference is not None  # no reference and no --update-reference: skipped above
         result = RegressResult(spec.name, args.scale, compare(reference, summarise(spec, report, rows), pending_rows))
         md = to_markdown(result)
         atomic_write_text(out / f"regress_{spec.name}.md", md)

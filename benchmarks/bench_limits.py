@@ -61,7 +61,7 @@ def main() -> None:
     from bench.data.datasets import load_dataset
     from bench.study import parse_overrides
     from methods.monosdf.trainer import WEIGHTED_SAMPLE, MonoSDFTrainer
-    from methods.registry import method_config
+    from methods.registry import typed_method_config
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scene", default="scannet_like_0")
@@ -80,11 +80,11 @@ def main() -> None:
 
     torch.set_num_threads(args.threads)
     scene = load_dataset(args.scene, args.scale)
-    cfg = method_config("monosdf", args.scale, parse_overrides(args.set))
+    cfg = typed_method_config("monosdf", args.scale, parse_overrides(args.set))
     trainer = MonoSDFTrainer(scene, cfg, seed=0)
     for _ in range(max(args.train, 3)):
         trainer.step()
-    samples = int(cfg["rays_per_batch"]) * (int(cfg["n_coarse"]) + int(cfg["n_fine"]))
+    samples = cfg.rays_per_batch * (cfg.n_coarse + cfg.n_fine)
 
     times = []
     for _ in range(args.steps):
@@ -97,17 +97,17 @@ def main() -> None:
     with counter:
         trainer.step()
     torch_flops = float(counter.get_total_flops())
-    R = int(cfg["rays_per_batch"])
-    n_extra = R * (3 if float(cfg.get("smooth_weight", 0)) > 0 else 1)  # eikonal / smoothness points in the SDF pass
-    levels, feats = int(cfg["grid_levels"]), int(cfg["grid_features"])
+    R = cfg.rays_per_batch
+    n_extra = R * (3 if cfg.smooth_weight > 0 else 1)  # eikonal / smoothness points in the SDF pass
+    levels, feats = cfg.grid_levels, cfg.grid_features
     # coarse pass: features only, no backward; rendering pass: features + Jacobian, forward and backward
-    coarse = grid_flops(R * int(cfg["n_coarse"]), levels, feats, False) - R * int(cfg["n_coarse"]) * levels * 2 * 8 * feats
+    coarse = grid_flops(R * cfg.n_coarse, levels, feats, False) - R * cfg.n_coarse * levels * 2 * 8 * feats
     render = grid_flops(samples + n_extra, levels, feats, True)
     total = torch_flops + coarse + render
     weighted = trainer.diagnostics().get("samples_weighted", float("nan"))
 
     gflops = total / step_s / 1e9
-    print(f"config: {R} rays x {cfg['n_coarse']} + {cfg['n_fine']} samples, grid {levels} x {feats}, MLP {cfg['mlp_hidden']} wide, "
+    print(f"config: {R} rays x {cfg.n_coarse} + {cfg.n_fine} samples, grid {levels} x {feats}, MLP {cfg.mlp_hidden} wide, "
           f"{args.threads} thread(s), after {max(args.train, 3) + args.steps} steps")
     print(f"step: median {step_s * 1000:.1f} ms -> {samples / step_s / 1e6:.3f} M ray-samples/s")
     print(f"FLOPs per step: {total / 1e9:.2f} G (torch-counted ops {torch_flops / 1e9:.2f} G, grid kernel {(coarse + render) / 1e9:.2f} G) "
@@ -115,7 +115,7 @@ def main() -> None:
     print(f"achieved {gflops:.1f} GFLOP/s = {100 * gflops / peaks[args.threads][0]:.1f} % of the 2048^3 peak, "
           f"{100 * gflops / peaks[args.threads][1]:.1f} % of the MLP-shaped peak ({args.threads} threads)")
     print(f"compute-bound limit at this FLOP count: {peaks[args.threads][1] * 1e9 / (total / samples) / 1e6:.1f} M ray-samples/s (MLP-shaped peak)")
-    print(f"effective samples per ray (weight > {WEIGHTED_SAMPLE:g}): {weighted:.1f} of {int(cfg['n_coarse']) + int(cfg['n_fine'])} "
+    print(f"effective samples per ray (weight > {WEIGHTED_SAMPLE:g}): {weighted:.1f} of {int(cfg.n_coarse) + int(cfg.n_fine)} "
           f"(in the steps measured)")
 
 

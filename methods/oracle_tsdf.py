@@ -14,21 +14,38 @@ shows how coverage grows with views. Fusion is the same projective TSDF the Scan
 from __future__ import annotations
 
 import time
-from typing import Any
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Annotated, Any, Literal
 
 import numpy as np
 
+from bench.data.config import Range, load_config
 from bench.data.errors import BenchInputError
 from bench.data.scene import Scene
 from methods.base import Artifacts, ProgressFn, Snapshot
 from methods.registry import register
-from metrics.tsdf import MONOSDF_BLOCK_M, block_resolution_for, tsdf_refuse
+from metrics.tsdf import block_resolution_for, tsdf_refuse
 from metrics.depth import align_depth
+
+
+@dataclass(frozen=True)
+class OracleConfig:
+    """Names and types; the values are ``configs/methods/oracle_tsdf.yaml`` (lengths in metres)."""
+
+    depth_source: Literal["gt", "prior_aligned"]
+    voxel_size: Annotated[float, Range(lo=0, lo_open=True)]
+    trunc_voxels: Annotated[float, Range(lo=0, lo_open=True)]
+    depth_trunc: Annotated[float, Range(lo=0, lo_open=True)]
+    block_m: Annotated[float, Range(lo=0, lo_open=True)]
+    fractions: tuple[Annotated[float, Range(lo=0, hi=1, lo_open=True)], ...]
 
 
 def fusion_depth(scene: Scene, views: np.ndarray, source: str) -> np.ndarray:
     """(V, H, W) float32 depth maps (m) of ``views`` to fuse: ``gt`` or ``prior_aligned`` (the mono prior
     with its per-view least-squares scale + shift against GT; pixels where either is 0 stay 0)."""
+    if scene.gt_depth is None:
+        raise BenchInputError(scene.root or scene.name, "oracle_tsdf needs GT depth maps (synthetic scenes have them)")
     gt = scene.gt_depth[views].astype(np.float32)
     if source == "gt":
         return gt
@@ -57,23 +74,25 @@ class OracleTSDF:
     m: MonoSDF's 16 cm), ``fractions``."""
 
     name = "oracle_tsdf"
+    config_type = OracleConfig
 
-    def fit(self, scene: Scene, config: dict[str, Any], seed: int, progress: ProgressFn | None = None) -> Artifacts:
+    def fit(self, scene: Scene, config: Mapping[str, Any], seed: int, progress: ProgressFn | None = None) -> Artifacts:
+        cfg = load_config(OracleConfig, config, f"{self.name} config")
         if scene.gt_depth is None:
             raise BenchInputError(scene.root or scene.name, "oracle_tsdf needs GT depth maps (synthetic scenes have them)")
         views = scene.view_indices("train")
-        depth = fusion_depth(scene, views, str(config.get("depth_source", "gt")))
-        voxel = float(config["voxel_size"])
+        depth = fusion_depth(scene, views, cfg.depth_source)
+        voxel = cfg.voxel_size
         snapshots: list[Snapshot] = []
         t0 = time.perf_counter()
         fuse_seconds = 0.0
-        for frac in config["fractions"]:
+        for frac in cfg.fractions:
             k = max(1, int(round(frac * len(views))))
             sel = views[:k]
             t = time.perf_counter()
             mesh = tsdf_refuse(None, scene.intrinsics[sel], scene.cam_to_world[sel], scene.height, scene.width, voxel_size=voxel,
-                               sdf_trunc=float(config["trunc_voxels"]) * voxel, depth_trunc=float(config["depth_trunc"]), depth_maps=depth[:k],
-                               block_resolution=block_resolution_for(voxel, float(config.get("block_m", MONOSDF_BLOCK_M))))
+                               sdf_trunc=cfg.trunc_voxels * voxel, depth_trunc=cfg.depth_trunc, depth_maps=depth[:k],
+                               block_resolution=block_resolution_for(voxel, cfg.block_m))
             fuse_seconds = time.perf_counter() - t
             snapshots.append(Snapshot(fraction=float(frac), iterations=int(k), seconds=fuse_seconds, mesh=mesh))
             if progress:

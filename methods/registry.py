@@ -8,6 +8,7 @@ from typing import Any, Callable
 
 import yaml
 
+from bench.data.config import load_config
 from bench.data.errors import BenchInputError
 
 _REGISTRY: dict[str, type] = {}
@@ -20,7 +21,7 @@ def register(name: str) -> Callable[[type], type]:
     def deco(cls: type) -> type:
         if name in _REGISTRY and _REGISTRY[name] is not cls:
             raise ValueError(f"method {name!r} registered twice")
-        cls.name = name
+        setattr(cls, "name", name)  # noqa: B010 (the attribute is the registry's, set on any class)
         _REGISTRY[name] = cls
         return cls
 
@@ -87,6 +88,15 @@ def get_method(name: str) -> Any:
     return _REGISTRY[name]()
 
 
+def config_type(name: str) -> type | None:
+    """The typed config class of method ``name`` (its ``config_type`` attribute; None for a plugin that
+    declares none: its config then stays an unchecked mapping)."""
+    _load_builtins()
+    if name not in _REGISTRY:
+        raise BenchInputError(f"method {name!r}", f"not in the registry (available: {sorted(_REGISTRY)})")
+    return getattr(_REGISTRY[name], "config_type", None)
+
+
 def _read_config(name: str, config_dir: Path) -> tuple[Path, dict[str, Any], dict[str, Any]]:
     """(path, defaults, scales) of ``configs/methods/<name>.yaml`` (a plugin's own ``config_path``), with
     ``base:`` inheritance resolved."""
@@ -110,7 +120,12 @@ def method_config(name: str, scale: str, overrides: dict[str, Any] | None = None
     ``configs/methods/<name>.yaml`` has the shape ``{description, base (optional), defaults: {...},
     scales: {tiny: {...}, ...}}``; ``base: other`` inherits the other method's defaults and scale presets
     (a variant family shares one training loop and one config, not a copy). Overrides may only name
-    keys that exist in ``defaults`` (a typo is an error, not a silent no-op).
+    keys that exist in ``defaults`` (a typo is an error, not a silent no-op). The result is checked
+    against the method's typed config (:func:`config_type`: every key declared, every value of its
+    type and range), so a bad preset or override fails here, naming the YAML file, before any job runs.
+
+    Returns the resolved mapping (JSON-serialisable: it is hashed into the job id and stored with the
+    result); :func:`typed_method_config` gives the typed object.
     """
     path, defaults, scales = _read_config(name, config_dir)
     if scale not in scales:
@@ -120,4 +135,16 @@ def method_config(name: str, scale: str, overrides: dict[str, Any] | None = None
         if key not in defaults:
             raise BenchInputError(path, f"override {key!r} is not a config key of {name!r} (keys: {sorted(defaults)})")
         cfg[key] = value
+    ctype = config_type(name)
+    if ctype is not None:
+        load_config(ctype, cfg, f"{path} (scale {scale!r}" + (f", overrides {sorted(overrides)})" if overrides else ")"))
     return cfg
+
+
+def typed_method_config(name: str, scale: str, overrides: dict[str, Any] | None = None, config_dir: Path = CONFIG_DIR) -> Any:
+    """:func:`method_config` as the method's typed config object (its :func:`config_type`)."""
+    cfg = method_config(name, scale, overrides, config_dir)
+    ctype = config_type(name)
+    if ctype is None:
+        raise BenchInputError(f"method {name!r}", "declares no config_type (a plugin): use method_config")
+    return load_config(ctype, cfg, f"method {name!r} config")

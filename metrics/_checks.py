@@ -18,7 +18,7 @@ def to_numpy(x: Any, name: str) -> np.ndarray:
     try:
         import torch
     except ImportError:  # pragma: no cover - torch is a hard dependency of the project
-        torch = None
+        torch = None  # type: ignore[assignment]
     if torch is not None and isinstance(x, torch.Tensor):
         return x.detach().cpu().numpy()
     raise TypeError(f"{name} must be a numpy.ndarray or torch.Tensor, got {type(x).__name__}")

@@ -130,7 +130,7 @@ def point_metrics(
     rec = float((d_g2p < tau).mean())
     f = 0.0 if prec + rec == 0 else 2.0 * prec * rec / (prec + rec)
     nc = float("nan")
-    if pn is not None:
+    if pn is not None and gn is not None:  # given together (checked above)
         nc_acc = np.abs((pn * gn[i_p2g]).sum(-1)).mean()
         nc_comp = np.abs((gn * pn[i_g2p]).sum(-1)).mean()
         nc = float(0.5 * (nc_acc + nc_comp))
@@ -195,7 +195,7 @@ def clean_mesh(mesh: Any, name: str = "mesh", empty_error: type[ValueError] = Va
         raise empty_error(f"{name} is empty ({v.shape[0]} vertices, {f.shape[0]} faces)")
     if f.min() < 0 or f.max() >= v.shape[0]:
         raise ValueError(f"{name} has face indices outside [0, {v.shape[0]})")
-    finite_v = np.isfinite(v).all(1)
+    finite_v = np.asarray(np.isfinite(v).all(1))
     f = f[finite_v[f].all(1)]
     if f.shape[0]:
         tri = v[f]

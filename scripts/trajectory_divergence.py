@@ -24,7 +24,7 @@ def main() -> None:
     from bench.data.datasets import load_dataset
     from bench.study import parse_overrides
     from methods.monosdf.trainer import MonoSDFTrainer
-    from methods.registry import method_config
+    from methods.registry import typed_method_config
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scene", default="scannet_like_0")
@@ -36,7 +36,7 @@ def main() -> None:
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     scene = load_dataset(args.scene, args.scale)
-    cfg = method_config("monosdf", args.scale, {"iterations": 8000, **parse_overrides(args.set)})
+    cfg = typed_method_config("monosdf", args.scale, {"iterations": 8000, **parse_overrides(args.set)})
     trainer = MonoSDFTrainer(scene, cfg, seed=args.seed)
     marks = {0, 1, 5, 20, 50, 100, 200, args.steps - 1}
     print("step loss colour depth |table|_1")

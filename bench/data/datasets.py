@@ -6,6 +6,12 @@ simulated prior profile). The dataset folder is keyed by recipe name, scale and 
 file's content, the variant (when it changes anything) and the code version, so editing a recipe
 makes a new dataset and reruns reuse the cached one. Datasets are written atomically, so a crash never
 leaves a half-written cache entry.
+
+The cache folder is ``results/cache/datasets`` of this checkout, or the folder named by the environment
+variable ``BENCH_CACHE`` when it is set (read once, when this module is imported: ``DEFAULT_CACHE`` is the
+default argument of the runner, the executors and ``bench.execute``). The test suite points it at a
+temporary folder (``tests/conftest.py``) unless it is already exported, so tests never write into
+``results/``; export it to keep one cache across test sessions, or to share one cache between checkouts.
 """
 
 from __future__ import annotations
@@ -25,7 +31,8 @@ from bench.data.scene import Scene
 
 REPO_ROOT = Path(__file__).resolve().parents[2]  # bench/data/datasets.py -> the repository
 SCENES_DIR = REPO_ROOT / "configs" / "scenes"
-DEFAULT_CACHE = REPO_ROOT / "results" / "cache" / "datasets"
+DEFAULT_CACHE = Path(os.environ["BENCH_CACHE"]).expanduser().absolute() if os.environ.get("BENCH_CACHE") else REPO_ROOT / "results" / "cache" / "datasets"
+"""Where datasets are synthesised and cached: ``$BENCH_CACHE`` if set (and not empty), else ``results/cache/datasets``."""
 
 
 def recipe_path(scene_name: str, scenes_dir: Path = SCENES_DIR) -> Path:
@@ -103,7 +110,7 @@ def load_dataset(scene_name: str, scale: str, cache_dir: Path = DEFAULT_CACHE,
     if is_folder_scene(scene_name):  # a user's own folder: loaded as it is (LLFF at its full resolution)
         return load_scene(ensure_dataset(scene_name, scale, cache_dir, effects=effects))
     recipe = load_recipe(recipe_path(scene_name))
-    options = {"factor": int(recipe.get("llff", "factors", scale=scale, default=[2])[0])} if recipe.format == "llff" else {}
+    options: dict[str, Any] = {"factor": int(recipe.get("llff", "factors", scale=scale, default=[2])[0])} if recipe.format == "llff" else {}
     # (the LLFF protocol trains and evaluates on images_N, FSGS: images_8)
     folder = ensure_dataset(scene_name, scale, cache_dir, effects=effects)
     try:

@@ -7,8 +7,8 @@ Each job is one Dask task (:func:`bench.executors.base.execute_job`, keyed
 ``bench-<job_id>-a<attempt>``); the client (this process) receives each row as its task finishes and
 :func:`bench.runner.run_jobs` writes it atomically right away. Workers must run the same code
 (the ``bench`` package installed from the same commit) and can reach the dataset cache (the default
-``results/cache/datasets`` of their own checkout, or the ``cache_dir`` given, e.g. on a shared file
-system); each synthesises missing datasets itself under a file lock.
+``results/cache/datasets`` of their own checkout, or ``$BENCH_CACHE`` where a worker's environment sets
+it, or the ``cache_dir`` given, e.g. on a shared file system); each synthesises missing datasets itself under a file lock.
 
 Fault tolerance: when a worker dies mid-task, the scheduler first reschedules the task itself up to
 its ``distributed.scheduler.allowed-failures`` (default 3) and then reports ``KilledWorker``; this
@@ -169,7 +169,7 @@ class DaskExecutor(Executor):
             for fut in pending:
                 fut.cancel()
 
-    def _running(self, keys: set[str]) -> int | None:
+    def _running(self, keys: set[Any]) -> int | None:
         """How many of ``keys`` the scheduler has assigned to a worker right now (None if unknown)."""
         try:
             processing = self.client.processing()

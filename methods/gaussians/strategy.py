@@ -18,7 +18,9 @@ rates); resizing the parameters resizes the Adam moments too (new entries get ze
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import cast
 
 import torch
 
@@ -42,7 +44,7 @@ class DefaultStrategy:
     n_split: int = 0
     n_prune: int = 0
 
-    def step_post_backward(self, params: dict[str, torch.Tensor], optimizers: dict[str, torch.optim.Optimizer], step: int,
+    def step_post_backward(self, params: dict[str, torch.Tensor], optimizers: Mapping[str, torch.optim.Optimizer], step: int,
                            means2d: torch.Tensor, radii: torch.Tensor, width: int, height: int, rng: torch.Generator) -> None:
         """Update the statistics from ``means2d.grad`` (pixels) and refine on schedule (``step`` 0-based)."""
         n = params["means"].shape[0]
@@ -53,7 +55,7 @@ class DefaultStrategy:
             vis = radii > 0
             g = means2d.grad.detach() * torch.tensor([width / 2.0, height / 2.0])
             self.grad2d[vis] += g[vis].norm(dim=-1)
-            self.count[vis] += 1
+            cast(torch.Tensor, self.count)[vis] += 1  # set with grad2d above
         s1 = step + 1
         if self.refine_start <= s1 < self.refine_stop and s1 % self.refine_every == 0:
             self._grow(params, optimizers, rng)
@@ -86,7 +88,7 @@ class DefaultStrategy:
                 opt.state[p] = st
 
     def _grow(self, params, optimizers, rng) -> None:
-        avg = self.grad2d / self.count.clamp_min(1)
+        avg = cast(torch.Tensor, self.grad2d) / cast(torch.Tensor, self.count).clamp_min(1)  # set by step_post_backward
         cand = avg > self.grad_threshold
         n = params["means"].shape[0]
         room = max(0, self.max_gaussians - n)

@@ -23,12 +23,13 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from typing import Any, Callable
+from typing import Any, Callable, cast
 
 import numpy as np
 import torch
 
 from bench.data.scene import Scene
+from methods.gaussians.config import GaussianConfig
 from methods.base import Artifacts, Snapshot
 from methods.gaussians import losses
 from methods.gaussians.model import init_params, init_points_from_views, render
@@ -56,10 +57,10 @@ def _bounds(scene: Scene, views: np.ndarray) -> tuple[float, float]:
     raise ValueError(f"scene {scene.name!r} has no LLFF near/far bounds (metadata['llff_bounds'])")
 
 
-def train_gaussians(scene: Scene, cfg: dict[str, Any], seed: int, progress: Callable[[float, str], None] | None = None) -> Artifacts:
+def train_gaussians(scene: Scene, cfg: GaussianConfig, seed: int, progress: Callable[[float, str], None] | None = None) -> Artifacts:
     """Fit the Gaussians of ``scene``'s training views and render its test views (see the module docstring)."""
-    if cfg.get("num_threads"):
-        torch.set_num_threads(int(cfg["num_threads"]))
+    if cfg.num_threads:
+        torch.set_num_threads(cfg.num_threads)
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     trng = torch.Generator().manual_seed(seed)
@@ -71,47 +72,43 @@ def train_gaussians(scene: Scene, cfg: dict[str, Any], seed: int, progress: Call
 
     t0 = time.perf_counter()
     pts, cols, counts = init_points_from_views(scene.images[train], scene.intrinsics[train], scene.cam_to_world[train], near, far,
-                                               n_depths=int(cfg["init_depths"]), n_random=int(cfg["init_random"]),
-                                               max_sweep_points=int(cfg["init_max_points"]), rng=rng,
-                                               cost_ratio=float(cfg["init_cost_ratio"]), cost=str(cfg["init_cost"]),
-                                               all_views=bool(cfg["init_all_views"]))
+                                               n_depths=cfg.init_depths, n_random=cfg.init_random,
+                                               max_sweep_points=cfg.init_max_points, rng=rng,
+                                               cost_ratio=cfg.init_cost_ratio, cost=cfg.init_cost,
+                                               all_views=cfg.init_all_views)
     centres = scene.cam_to_world[train][:, :3, 3]
     # footprint cap: sigma <= init_max_px pixels at the point's distance from the nearest training camera
     cam_dist = np.linalg.norm(pts[:, None, :] - centres[None], axis=-1).min(1)
     focal = float(scene.intrinsics[train][:, 0, 0].mean())
-    params = init_params(pts, cols, float(cfg["init_opacity"]), max_scale=float(cfg["init_max_px"]) * cam_dist / focal)
+    params = init_params(pts, cols, cfg.init_opacity, max_scale=cfg.init_max_px * cam_dist / focal)
     extent = 1.1 * float(np.linalg.norm(centres - centres.mean(0), axis=1).max())
     extent = max(extent, 0.05 * far)  # forward-facing rigs have a tiny baseline: keep a depth-related floor
     lr_scale_means = extent
-    optimizers = {k: torch.optim.Adam([params[k]], lr=float(cfg[v]) * (lr_scale_means if k == "means" else 1.0), eps=1e-15)
+    optimizers = {k: torch.optim.Adam([params[k]], lr=float(getattr(cfg, v)) * (lr_scale_means if k == "means" else 1.0), eps=1e-15)
                   for k, v in PARAM_LR_KEYS.items()}
-    iters = int(cfg["iterations"])
-    strategy = DefaultStrategy(grad_threshold=float(cfg["densify_grad_threshold"]), percent_dense=float(cfg["percent_dense"]),
-                               refine_start=int(cfg["refine_start"]), refine_stop=int(cfg["refine_stop_fraction"] * iters),
-                               refine_every=int(cfg["refine_every"]), reset_every=int(cfg["opacity_reset_every"]),
-                               prune_opacity=float(cfg["prune_opacity"]), max_gaussians=int(cfg["max_gaussians"]), scene_extent=extent)
+    iters = cfg.iterations
+    strategy = DefaultStrategy(grad_threshold=cfg.densify_grad_threshold, percent_dense=cfg.percent_dense,
+                               refine_start=cfg.refine_start, refine_stop=int(cfg.refine_stop_fraction * iters),
+                               refine_every=cfg.refine_every, reset_every=cfg.opacity_reset_every,
+                               prune_opacity=cfg.prune_opacity, max_gaussians=cfg.max_gaussians, scene_extent=extent)
     viewmats = torch.tensor(np.linalg.inv(scene.cam_to_world), dtype=torch.float32)
     Ks = torch.tensor(scene.intrinsics, dtype=torch.float32)
     images = torch.tensor(scene.images, dtype=torch.float32)
     mono = torch.tensor(scene.mono_depth, dtype=torch.float32) if scene.mono_depth is not None else None
     bg = torch.zeros(3)
-    rkw = {"near": float(cfg["near"])}
+    rkw = {"near": cfg.near}
     timings["init"] = time.perf_counter() - t0
 
-    depth_loss = str(cfg["depth_loss"])
-    if depth_loss not in ("none", "pearson"):
-        raise ValueError(f"depth_loss must be 'none' or 'pearson', got {depth_loss!r}")
-    use_unc = bool(cfg["uncertainty"])
+    depth_loss = cfg.depth_loss  # none | pearson (checked by GaussianConfig)
+    use_unc = cfg.uncertainty
     if (depth_loss != "none" or use_unc) and mono is None:
         raise ValueError(f"scene {scene.name!r} has no monocular depth prior but depth_loss={depth_loss!r}")
-    if bool(cfg["mask_constraint"]) and not use_unc:
-        raise ValueError("mask_constraint needs uncertainty: true (it acts on high-uncertainty pixels)")
-    stage1 = int(round(float(cfg["stage1_fraction"]) * iters)) if use_unc else iters
-    fractions = sorted(float(f) for f in cfg["fractions"])
+    stage1 = int(round(cfg.stage1_fraction * iters)) if use_unc else iters
+    fractions = sorted(float(f) for f in cfg.fractions)
     snap_steps = {max(1, int(round(f * iters))): f for f in fractions}
-    sh_degree = int(cfg["sh_degree"])
-    sh_every = int(cfg["sh_increase_every"])
-    lr0, lr1 = float(cfg["lr_means"]) * lr_scale_means, float(cfg["lr_means_final"]) * lr_scale_means
+    sh_degree = cfg.sh_degree
+    sh_every = cfg.sh_increase_every
+    lr0, lr1 = cfg.lr_means * lr_scale_means, cfg.lr_means_final * lr_scale_means
 
     depth_weights: dict[int, torch.Tensor] = {}
     mask_data: dict[str, Any] | None = None
@@ -141,12 +138,13 @@ def train_gaussians(scene: Scene, cfg: dict[str, Any], seed: int, progress: Call
         m2d = out["proj"].means2d
         m2d.retain_grad()
         img = out["color"]
-        loss = losses.photometric_loss(img, images[vi], float(cfg["lambda_dssim"]))
+        loss = losses.photometric_loss(img, images[vi], cfg.lambda_dssim)
         if depth_loss == "pearson":
             wmap = depth_weights.get(vi) if step >= stage1 else None
-            loss = loss + float(cfg["depth_weight"]) * losses.pearson_depth_loss(out["depth"], mono[vi], wmap)
-        if mask_data is not None and step >= stage1 and float(cfg["mask_weight"]) > 0:
-            loss = loss + float(cfg["mask_weight"]) * _mask_loss(out, vi, mask_data, viewmats, Ks, W, H)
+            # mono is not None here: a missing prior with depth_loss != "none" raised before the loop
+            loss = loss + cfg.depth_weight * losses.pearson_depth_loss(out["depth"], cast(torch.Tensor, mono)[vi], wmap)
+        if mask_data is not None and step >= stage1 and cfg.mask_weight > 0:
+            loss = loss + cfg.mask_weight * _mask_loss(out, vi, mask_data, viewmats, Ks, W, H)
         loss.backward()
         strategy.step_post_backward(params, optimizers, step, m2d, out["proj"].radii, W, H, trng)
         for name, opt in optimizers.items():
@@ -196,18 +194,18 @@ def _uncertainty_stage(scene, train, params, viewmats, Ks, W, H, deg, bg, rkw, c
 
     ref_depth = _render_depths(params, train, viewmats, Ks, W, H, deg, bg, rkw)
     sub = restrict_scene(scene, train)
-    res = run_uncertainty_stage(sub, ref_depth, dict(cfg.get("uncertainty_config") or {}), rng_seed=seed)
+    res = run_uncertainty_stage(sub, ref_depth, cfg.uncertainty_config, rng_seed=seed)
     U = np.asarray(res.uncertainty, dtype=np.float32)
     inst = np.asarray(res.instance_ids, dtype=np.int32)
-    u_cut = float(cfg["u_cut"])
+    u_cut = cfg.u_cut
     weights = {}
     for i, v in enumerate(train):
         c = 1.0 - U[i]
         c = np.where((inst[i] > 0) & (U[i] > u_cut), 0.0, c)
         weights[int(v)] = torch.tensor(c, dtype=torch.float32)
     mask_data = None
-    if bool(cfg["mask_constraint"]):
-        thr = float(cfg["mask_u_threshold"])
+    if cfg.mask_constraint:
+        thr = cfg.mask_u_threshold
         dist_maps = {}
         for i, v in enumerate(train):
             for k in np.unique(inst[i]):
@@ -216,7 +214,7 @@ def _uncertainty_stage(scene, train, params, viewmats, Ks, W, H, deg, bg, rkw, c
                 m = inst[i] == k
                 dist_maps[(int(v), int(k))] = torch.tensor(distance_transform_edt(~m), dtype=torch.float32)
         mask_data = {"U": {int(v): torch.tensor(U[i]) for i, v in enumerate(train)}, "inst": {int(v): torch.tensor(inst[i]) for i, v in enumerate(train)},
-                     "dist": dist_maps, "thr": thr, "train": [int(v) for v in train], "max_pixels": int(cfg["mask_max_pixels"])}
+                     "dist": dist_maps, "thr": thr, "train": [int(v) for v in train], "max_pixels": cfg.mask_max_pixels}
     unc_full = np.zeros((scene.num_views, H, W), np.float32)
     unc_full[train] = U
     q = {k: (float(v) if isinstance(v, (int, float, np.floating)) else v) for k, v in (getattr(res, "quality", None) or {}).items()}

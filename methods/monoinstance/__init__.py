@@ -8,11 +8,10 @@ all three on a :class:`bench.data.scene.Scene`. Defaults: ``configs/methods/mono
 
 from methods.monoinstance.alignment import align_mono_depth, align_mono_depth_status
 from methods.monoinstance.association import Association, associate_instances
+from methods.monoinstance.config import MonoInstanceConfig, UncertaintyStageConfig, load_stage_config, stage_defaults
 from methods.monoinstance.quality import adjusted_rand_index, purity
 from methods.monoinstance.stage import (
     UncertaintyResult,
-    load_stage_defaults,
-    resolve_stage_config,
     run_uncertainty_stage,
     save_uncertainty_maps,
     split_stage_config,
@@ -30,11 +29,13 @@ __all__ = [
     "associate_instances",
     "certainty_from_densities",
     "estimate_uncertainty",
-    "load_stage_defaults",
+    "MonoInstanceConfig",
+    "UncertaintyStageConfig",
+    "load_stage_config",
     "purity",
-    "resolve_stage_config",
     "run_uncertainty_stage",
     "save_uncertainty_maps",
     "split_stage_config",
+    "stage_defaults",
     "stage_quality",
 ]

@@ -39,27 +39,13 @@ instance flagged background (their uncertainty is 0 either way).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
+from methods.monoinstance.config import UncertaintyStageConfig, load_stage_config
 from metrics.camera import backproject_pixels
-
-ASSOC_DEFAULTS: dict[str, Any] = {
-    "assoc_min_pixels": 20,
-    "assoc_max_points": 128,
-    "assoc_max_target_points": 1024,
-    "assoc_chamfer_m": 0.3,
-    "assoc_chamfer_relative": None,
-    "assoc_chamfer_mode": "min",
-    "assoc_overlap_radius_m": 0.08,
-    "assoc_overlap_min": 0.3,
-    "assoc_cluster": "greedy",
-    "assoc_seed": 0,
-    "assoc_louvain_resolution": 1.0,
-    "assoc_background": "associate",
-}
-
 
 @dataclass
 class Association:
@@ -98,15 +84,6 @@ def _strided(pts: np.ndarray, k: int) -> np.ndarray:
     return pts[np.linspace(0, pts.shape[0] - 1, k).astype(np.int64)]
 
 
-def _check_config(cfg: dict[str, Any]) -> None:
-    if cfg["assoc_cluster"] not in ("components", "louvain", "greedy", "given"):
-        raise ValueError(f"assoc_cluster must be components, louvain, greedy or given, got {cfg['assoc_cluster']!r}")
-    if cfg["assoc_chamfer_mode"] not in ("symmetric", "min"):
-        raise ValueError(f"assoc_chamfer_mode must be symmetric or min, got {cfg['assoc_chamfer_mode']!r}")
-    if cfg["assoc_background"] not in ("associate", "mark"):
-        raise ValueError(f"assoc_background must be associate or mark, got {cfg['assoc_background']!r}")
-
-
 def _given_ids(seg: np.ndarray, seg_background: list[dict[int, bool]]) -> Association:
     """``assoc_cluster: given``: the per-view ids are already consistent across views (the paper's DTU
     setting: one object segmented from the background, no multi-view association). A global id is
@@ -128,7 +105,7 @@ def associate_instances(
     depth: np.ndarray,
     K: np.ndarray,
     cam_to_world: np.ndarray,
-    config: dict[str, Any] | None = None,
+    config: UncertaintyStageConfig | Mapping[str, Any] | None = None,
 ) -> Association:
     """Associate per-view segments into multi-view consistent instances (module docstring).
 
@@ -137,7 +114,8 @@ def associate_instances(
         seg_background: per view, dict local id -> True if background.
         depth: (N, H, W) aligned metric z-depth (metres, 0 = invalid).
         K: (N, 3, 3) intrinsics (pixels); cam_to_world: (N, 4, 4), OpenCV axes.
-        config: ``assoc_*`` keys (defaults :data:`ASSOC_DEFAULTS`; unknown keys are ignored here);
+        config: the stage's config (:class:`methods.monoinstance.config.UncertaintyStageConfig`, or
+            overrides of its YAML); this step reads the ``assoc_*`` keys.
             ``assoc_cluster: given`` skips the association and keeps the per-view ids (DTU).
 
     Returns:
@@ -145,8 +123,7 @@ def associate_instances(
     """
     from scipy.spatial import cKDTree
 
-    cfg = {**ASSOC_DEFAULTS, **{k: v for k, v in (config or {}).items() if k in ASSOC_DEFAULTS}}
-    _check_config(cfg)
+    cfg = load_stage_config(config)
     seg = np.asarray(seg_masks)
     dep = np.asarray(depth)
     if seg.ndim != 3 or dep.shape != seg.shape:
@@ -154,7 +131,7 @@ def associate_instances(
     n_views = seg.shape[0]
     if len(seg_background) != n_views:
         raise ValueError(f"seg_background has {len(seg_background)} views, expected {n_views}")
-    if cfg["assoc_cluster"] == "given":
+    if cfg.assoc_cluster == "given":
         return _given_ids(seg, seg_background)
     K = np.broadcast_to(np.asarray(K, dtype=np.float64), (n_views, 3, 3))
     c2w = np.asarray(cam_to_world, dtype=np.float64)
@@ -173,18 +150,18 @@ def associate_instances(
                 continue
             rows, cols = np.nonzero((seg[v] == sid) & valid)
             bg = bool(seg_background[v].get(sid, False))
-            if rows.size < cfg["assoc_min_pixels"]:
+            if rows.size < cfg.assoc_min_pixels:
                 small.append((v, sid))
                 continue
             nodes.append((v, sid, int(rows.size)))
             node_bg.append(bg)
             pts = backproject_pixels(dep[v], rows, cols, K[v], c2w[v])
-            targets.append(_strided(pts, int(cfg["assoc_max_target_points"])))
-            clouds.append(_strided(pts, int(cfg["assoc_max_points"])))
+            targets.append(_strided(pts, cfg.assoc_max_target_points))
+            clouds.append(_strided(pts, cfg.assoc_max_points))
     n = len(nodes)
     views = np.array([nd[0] for nd in nodes], dtype=np.int64)
     bgf = np.array(node_bg, dtype=bool)
-    in_graph = np.ones(n, dtype=bool) if cfg["assoc_background"] == "associate" else ~bgf
+    in_graph = np.ones(n, dtype=bool) if cfg.assoc_background == "associate" else ~bgf
 
     # ---- candidate pairs (bounding boxes grown by the largest threshold)
     edges: list[tuple[int, int, float]] = []
@@ -193,11 +170,11 @@ def associate_instances(
         lo = np.array([c.min(0) for c in clouds])
         hi = np.array([c.max(0) for c in clouds])
         diag = np.linalg.norm(hi - lo, axis=1)
-        if cfg["assoc_chamfer_relative"] is not None:
-            thr_pair = float(cfg["assoc_chamfer_relative"]) * np.minimum(diag[:, None], diag[None, :])
+        if cfg.assoc_chamfer_relative is not None:
+            thr_pair = cfg.assoc_chamfer_relative * np.minimum(diag[:, None], diag[None, :])
         else:
-            thr_pair = np.full((n, n), float(cfg["assoc_chamfer_m"]))
-        grow = np.maximum(thr_pair, float(cfg["assoc_overlap_radius_m"]))
+            thr_pair = np.full((n, n), cfg.assoc_chamfer_m)
+        grow = np.maximum(thr_pair, cfg.assoc_overlap_radius_m)
         sep = np.maximum(lo[:, None, :] - hi[None, :, :], lo[None, :, :] - hi[:, None, :]).max(-1)
         cand = (
             (sep <= grow)
@@ -208,7 +185,7 @@ def associate_instances(
         )
         ia, ib = np.nonzero(np.triu(cand, 1))
         n_cand = int(ia.size)
-        rad = float(cfg["assoc_overlap_radius_m"])
+        rad = cfg.assoc_overlap_radius_m
         # directed nearest distances d(a -> B) for every candidate pair, batched per target node B:
         # one KD-tree and one query call per node instead of two per pair
         # (per directed pair only two numbers are needed: the mean distance and the overlap fraction,
@@ -231,16 +208,16 @@ def associate_instances(
                 overlap[(a, b)] = o
         for a, b in zip(ia.tolist(), ib.tolist()):
             mab, mba = mean_d[(a, b)], mean_d[(b, a)]
-            cd = 0.5 * (mab + mba) if cfg["assoc_chamfer_mode"] == "symmetric" else min(mab, mba)
+            cd = 0.5 * (mab + mba) if cfg.assoc_chamfer_mode == "symmetric" else min(mab, mba)
             oab, oba = overlap[(a, b)], overlap[(b, a)]
-            if cd < thr_pair[a, b] and max(oab, oba) >= cfg["assoc_overlap_min"]:
+            if cd < thr_pair[a, b] and max(oab, oba) >= cfg.assoc_overlap_min:
                 edges.append((a, b, 0.5 * (oab + oba)))
 
     # ---- clustering
     clusters, n_split = _cluster(n, views, edges, nodes, cfg)
     # ---- global ids
     clusters = sorted((sorted(c) for c in clusters), key=lambda c: c[0])  # node order = (view, local id)
-    lut = [dict() for _ in range(n_views)]
+    lut: list[dict[int, int]] = [dict() for _ in range(n_views)]
     is_bg: dict[int, bool] = {}
     table = []
     for gi, members in enumerate(clusters, start=1):
@@ -276,7 +253,7 @@ def associate_instances(
 
 def _cluster(n: int, views: np.ndarray, edges: list[tuple[int, int, float]], nodes, cfg) -> tuple[list[list[int]], int]:
     """Partition of range(n) into clusters with at most one node per view; returns (clusters, splits)."""
-    method = cfg["assoc_cluster"]
+    method = cfg.assoc_cluster
     if method == "greedy":
         parent = list(range(n))
         vsets = [{int(views[i])} for i in range(n)]
@@ -310,7 +287,7 @@ def _cluster(n: int, views: np.ndarray, edges: list[tuple[int, int, float]], nod
         comps = [
             sorted(c)
             for c in nx.community.louvain_communities(
-                g, weight="weight", resolution=float(cfg["assoc_louvain_resolution"]), seed=int(cfg["assoc_seed"])
+                g, weight="weight", resolution=cfg.assoc_louvain_resolution, seed=cfg.assoc_seed
             )
         ]
     out: list[list[int]] = []

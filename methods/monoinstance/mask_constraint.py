@@ -50,6 +50,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from methods.monoinstance.config import MonoInstanceConfig
 from methods.monosdf.render import RenderOutput
 
 
@@ -85,24 +86,17 @@ class MaskConstraint:
     """Callable extra loss for :class:`methods.monosdf.trainer.MonoSDFTrainer` (``extra_losses``)."""
 
     def __init__(self, trainer: Any, instance_ids: np.ndarray, is_background: dict[int, bool], untrusted: np.ndarray,
-                 cfg: dict[str, Any]) -> None:
+                 cfg: MonoInstanceConfig) -> None:
         """``untrusted``: (V, H, W) bool, rays whose prior weight is 0 (certainty below the cut-off)."""
-        self.weight = float(cfg["mask_weight"])
+        self.weight = cfg.mask_weight
         self.untrusted = torch.from_numpy(untrusted.reshape(untrusted.shape[0], -1))
         self.cfg = cfg
-        self.hit_threshold = float(cfg.get("mask_hit_threshold", 0.0))
-        self.count_rule = str(cfg.get("mask_count_rule", "code"))
-        self.normalisation = str(cfg.get("mask_normalisation", "code"))
-        for key, val in (("mask_count_rule", self.count_rule), ("mask_normalisation", self.normalisation)):
-            if val not in ("code", "ours"):
-                raise ValueError(f"{key} must be 'code' (official release) or 'ours', got {val!r}")
-        self.renormalise = bool(cfg.get("mask_renormalise", False))
-        self.source_choice = str(cfg.get("mask_source_choice", "random"))
-        if self.source_choice not in ("random", "nearest"):
-            raise ValueError(f"mask_source_choice must be 'random' (official release) or 'nearest', got {self.source_choice!r}")
-        erode = int(cfg.get("mask_erode_px", 2))
-        if erode < 0:
-            raise ValueError(f"mask_erode_px must be >= 0, got {erode}")
+        self.hit_threshold = cfg.mask_hit_threshold
+        self.count_rule = cfg.mask_count_rule  # code (official release) | ours
+        self.normalisation = cfg.mask_normalisation  # code | ours
+        self.renormalise = cfg.mask_renormalise
+        self.source_choice = cfg.mask_source_choice  # random (official release) | nearest
+        erode = cfg.mask_erode_px
         self._sums: dict[str, float] = {}
         self._steps = 0
         scene, views = trainer.scene, trainer.views
@@ -118,7 +112,7 @@ class MaskConstraint:
         self.centre = torch.from_numpy(normalisation(scene)[0].astype(np.float32))
         self.K = torch.from_numpy(scene.intrinsics[views].astype(np.float32))
         self.w2c = torch.from_numpy(np.linalg.inv(scene.cam_to_world[views]).astype(np.float32))
-        min_area = float(cfg["mask_min_area_frac"]) * H * W
+        min_area = cfg.mask_min_area_frac * H * W
         centres: dict[int, dict[int, np.ndarray]] = {}  # instance -> view -> unit ray through bbox centre
         for v in range(V):
             for k in np.unique(instance_ids[v]):
@@ -130,12 +124,12 @@ class MaskConstraint:
                 cy, cx = int(round((ys.min() + ys.max()) / 2)), int(round((xs.min() + xs.max()) / 2))
                 centres.setdefault(int(k), {})[v] = rays.dirs[v, cy * W + cx].numpy().astype(np.float64)
         origins = rays.origins.numpy().astype(np.float64)
-        self.n_source = int(cfg["mask_n_source"])
+        self.n_source = cfg.mask_n_source
         self.candidates: dict[tuple[int, int], list[int]] = {}  # (view, instance) -> every valid source view, nearest first
         self.sources: dict[tuple[int, int], list[int]] = {}  # ... the n_source nearest (``mask_source_choice: nearest``)
-        lo, hi = np.deg2rad(cfg["mask_min_angle_deg"]), np.deg2rad(cfg["mask_max_angle_deg"])
+        lo, hi = np.deg2rad(cfg.mask_min_angle_deg), np.deg2rad(cfg.mask_max_angle_deg)
         for k, per_view in centres.items():
-            if len(per_view) < int(cfg["mask_min_views"]):
+            if len(per_view) < cfg.mask_min_views:
                 continue
             for v, d in per_view.items():
                 cands = []
@@ -144,7 +138,7 @@ class MaskConstraint:
                         continue
                     ang = np.arccos(np.clip(d @ dj, -1.0, 1.0))
                     dist = _ray_distance(origins[v], d, origins[j], dj)
-                    if lo < ang < hi and dist < float(cfg["mask_max_ray_dist"]):
+                    if lo < ang < hi and dist < cfg.mask_max_ray_dist:
                         cands.append((dist, j))
                 if cands:
                     self.candidates[(v, k)] = [j for _, j in sorted(cands)]

@@ -18,14 +18,18 @@ rows of Table 4 are configs of this one method. Optional code-only final phase
 
 from __future__ import annotations
 
+import dataclasses
 import time
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 import torch
 
+from bench.data.config import load_config
 from bench.data.scene import Scene
 from methods.base import Artifacts, ProgressFn
+from methods.monoinstance.config import MonoInstanceConfig
 from methods.monoinstance.mask_constraint import MaskConstraint
 from methods.monoinstance.sampling import GuidedSampler
 from methods.monoinstance.stage import run_uncertainty_stage
@@ -55,31 +59,32 @@ class MonoInstance:
     """MonoSDF + MonoInstance's uncertainty modules (each switchable by config)."""
 
     name = "monoinstance"
+    config_type = MonoInstanceConfig
 
-    def fit(self, scene: Scene, config: dict[str, Any], seed: int, progress: ProgressFn | None = None) -> Artifacts:
-        set_threads(config)
+    def fit(self, scene: Scene, config: Mapping[str, Any], seed: int, progress: ProgressFn | None = None) -> Artifacts:
+        cfg = load_config(MonoInstanceConfig, config, f"{self.name} config")
+        set_threads(cfg.threads)
         t_start = time.perf_counter()
-        trainer = MonoSDFTrainer(scene, config, seed)
+        trainer = MonoSDFTrainer(scene, cfg, seed)
         timings = {"setup": time.perf_counter() - t_start}
-        total = int(config["iterations"])
-        modules_on = bool(config["uncertainty"] or config["guided_sampling"] or config["mask_constraint"])
+        total = cfg.iterations
         extra: dict[str, Any] = {}
         stage: dict[str, np.ndarray] = {}
         events = {}
-        if modules_on:
-            stage1_end = max(1, int(round(float(config["stage1_fraction"]) * total)))
-            events[stage1_end] = lambda: stage.update(U=self._between_stages(trainer, scene, config, seed, timings, extra))
-            final_start = total - int(round(float(config["final_phase_fraction"]) * total))
+        if cfg.modules_on:
+            stage1_end = max(1, int(round(cfg.stage1_fraction * total)))
+            events[stage1_end] = lambda: stage.update(U=self._between_stages(trainer, scene, cfg, seed, timings, extra))
+            final_start = total - int(round(cfg.final_phase_fraction * total))
             if final_start < total:  # code-only final phase: no mask constraint, its own depth / normal weights and lr
                 def final_phase() -> None:
                     trainer.extra_losses.clear()
-                    trainer.cfg = {**trainer.cfg, "depth_weight": float(config["final_phase_depth_weight"]),
-                                   "normal_weight": float(config["final_phase_normal_weight"])}
-                    if config["final_phase_lr"] is not None:
-                        trainer.fixed_lr = float(config["final_phase_lr"])
+                    trainer.cfg = dataclasses.replace(trainer.cfg, depth_weight=cfg.final_phase_depth_weight,
+                                                      normal_weight=cfg.final_phase_normal_weight)
+                    if cfg.final_phase_lr is not None:
+                        trainer.fixed_lr = cfg.final_phase_lr
 
                 events[max(final_start, stage1_end)] = final_phase if final_start > stage1_end else _chain(events[stage1_end], final_phase)
-        snapshots, train_s, mesh_s = train_with_snapshots(trainer, total, list(config["fractions"]), int(config["mesh_resolution"]),
+        snapshots, train_s, mesh_s = train_with_snapshots(trainer, total, list(cfg.fractions), cfg.mesh_resolution,
                                                           progress, start_seconds=timings["setup"], events=events)
         timings.update(train=train_s, mesh=mesh_s)
         uncertainty = stage.get("U")
@@ -91,11 +96,11 @@ class MonoInstance:
         return Artifacts(snapshots=snapshots, timings=timings, iterations=trainer.step_count, uncertainty=full_u, extra=extra)
 
     @staticmethod
-    def _between_stages(trainer: MonoSDFTrainer, scene: Scene, config: dict[str, Any], seed: int,
+    def _between_stages(trainer: MonoSDFTrainer, scene: Scene, cfg: MonoInstanceConfig, seed: int,
                         timings: dict[str, float], extra: dict[str, Any]) -> np.ndarray:
         """Render the reference depth, run the uncertainty stage, switch on the stage-2 modules."""
-        stage_cfg = dict(config["uncertainty_stage"] or {})
-        f = int(stage_cfg.get("ref_depth_downscale", 4))
+        stage_cfg = cfg.stage
+        f = stage_cfg.ref_depth_downscale
         t = time.perf_counter()
         ref = np.zeros((scene.num_views, -(-scene.height // f), -(-scene.width // f)), dtype=np.float32)
         for slot, v in enumerate(trainer.views):
@@ -108,13 +113,13 @@ class MonoInstance:
         views = trainer.views
         U = result.uncertainty[views]
         ids = result.instance_ids[views]
-        c = certainty_weights(U, ids, result.is_background, float(config["certainty_cutoff"]))
-        if config["uncertainty"]:
+        c = certainty_weights(U, ids, result.is_background, cfg.certainty_cutoff)
+        if cfg.uncertainty:
             trainer.prior_weight = torch.from_numpy(c.reshape(len(views), -1))
-        if config["guided_sampling"]:
-            trainer.pixel_sampler = GuidedSampler(ids, result.is_background, U, prob_offset=float(config["sampling_prob_offset"]))
-        if config["mask_constraint"]:
-            mask_term = MaskConstraint(trainer, ids, result.is_background, c <= 0, config)
+        if cfg.guided_sampling:
+            trainer.pixel_sampler = GuidedSampler(ids, result.is_background, U, prob_offset=cfg.sampling_prob_offset)
+        if cfg.mask_constraint:
+            mask_term = MaskConstraint(trainer, ids, result.is_background, c <= 0, cfg)
             trainer.extra_losses.append(mask_term)
             trainer.diagnostic_sources.append(mask_term.diagnostics)
         return U

@@ -17,50 +17,25 @@ from __future__ import annotations
 import io
 import time
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
+from bench.data.config import field_names
 from methods.monoinstance.alignment import align_mono_depth_status
-from methods.monoinstance.association import ASSOC_DEFAULTS, associate_instances
+from methods.monoinstance.association import associate_instances
+from methods.monoinstance.config import UncertaintyStageConfig, load_stage_config
 from methods.monoinstance.quality import adjusted_rand_index, purity
-from methods.monoinstance.uncertainty import UNCERTAINTY_DEFAULTS, InstanceUncertainty, estimate_uncertainty
-
-CONFIG_PATH = Path(__file__).resolve().parents[2] / "configs" / "methods" / "monoinstance_uncertainty.yaml"
-ALIGN_KEYS = ("align_mode", "align_border_px", "align_min_pixels", "ref_depth_downscale", "nonfinite_depth")
+from methods.monoinstance.uncertainty import InstanceUncertainty, estimate_uncertainty
 
 
-def load_stage_defaults(path: Path = CONFIG_PATH) -> dict[str, Any]:
-    """The stage's default parameters (the YAML mapping)."""
-    data = yaml.safe_load(Path(path).read_text()) or {}
-    if not isinstance(data, dict):
-        raise ValueError(f"{path}: expected a mapping of parameters")
-    return data
-
-
-def stage_keys() -> set[str]:
-    return set(load_stage_defaults())
-
-
-def split_stage_config(config: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+def split_stage_config(config: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
     """Split a method config into (this stage's keys, the rest)."""
-    keys = stage_keys()
+    keys = set(field_names(UncertaintyStageConfig))
     return {k: v for k, v in config.items() if k in keys}, {k: v for k, v in config.items() if k not in keys}
-
-
-def resolve_stage_config(config: dict[str, Any] | None) -> dict[str, Any]:
-    """Defaults (YAML) <- ``config``; a key the stage does not have raises ValueError."""
-    cfg = load_stage_defaults()
-    unknown = sorted(set(config or {}) - set(cfg))
-    if unknown:
-        raise ValueError(f"unknown uncertainty-stage parameter(s) {unknown} (known: {sorted(cfg)})")
-    cfg.update(config or {})
-    if cfg["nonfinite_depth"] not in ("mask", "raise"):
-        raise ValueError(f"nonfinite_depth must be mask or raise, got {cfg['nonfinite_depth']!r}")
-    return cfg
 
 
 def scene_radius_of(scale_mat: np.ndarray) -> float:
@@ -96,7 +71,7 @@ class UncertaintyResult:
     quality: dict[str, float] = field(default_factory=dict)
     diagnostics: dict[str, float] = field(default_factory=dict)
     instances: dict[int, InstanceUncertainty] = field(default_factory=dict)
-    config: dict[str, Any] = field(default_factory=dict)
+    config: UncertaintyStageConfig | None = None
 
 
 def _nonfinite(name: str, arr: np.ndarray, policy: str) -> np.ndarray:
@@ -112,7 +87,8 @@ def _nonfinite(name: str, arr: np.ndarray, policy: str) -> np.ndarray:
 
 
 def run_uncertainty_stage(
-    scene, ref_depth: np.ndarray, config: dict[str, Any] | None = None, rng_seed: int = 0, quality: bool = True
+    scene, ref_depth: np.ndarray, config: UncertaintyStageConfig | Mapping[str, Any] | None = None, rng_seed: int = 0,
+    quality: bool = True,
 ) -> UncertaintyResult:
     """Alignment -> multi-view association -> density uncertainty (module docstring).
 
@@ -120,7 +96,7 @@ def run_uncertainty_stage(
         scene: :class:`bench.data.scene.Scene` with ``mono_depth``, ``seg_masks``, ``seg_background``.
         ref_depth: (N, H, W) reference z-depth in metres (stage-1 render; GT in tests), or
             (N, H/f, W/f) rendered at 1/f resolution. 0 = invalid.
-        config: overrides of ``configs/methods/monoinstance_uncertainty.yaml``.
+        config: the stage's config, or overrides of ``configs/methods/monoinstance_uncertainty.yaml``.
         rng_seed: seeds the subsampling (same seed, same U).
         quality: compute :func:`stage_quality` when the scene has GT (about 1 s at small scale).
 
@@ -131,33 +107,33 @@ def run_uncertainty_stage(
         ValueError: missing priors / segmentation, bad shapes, unknown config keys, or (with
             ``nonfinite_depth: raise``) NaN / inf in a depth map (the message names the views).
     """
-    cfg = resolve_stage_config(config)
+    cfg = load_stage_config(config)
     if scene.mono_depth is None or scene.seg_masks is None or scene.seg_background is None:
         raise ValueError(f"scene {scene.name!r} needs mono_depth, seg_masks and seg_background for the uncertainty stage")
     n = scene.num_views
     ref = np.asarray(ref_depth, dtype=np.float32)
     if ref.ndim != 3 or ref.shape[0] != n:
         raise ValueError(f"ref_depth must be ({n}, H, W) or ({n}, H/f, W/f), got {ref.shape}")
-    mono = _nonfinite("mono_depth", np.asarray(scene.mono_depth, dtype=np.float32), cfg["nonfinite_depth"])
-    ref = _nonfinite("ref_depth", ref, cfg["nonfinite_depth"])
-    if cfg["scene_radius"] is None:
-        cfg["scene_radius"] = scene_radius_of(scene.scale_mat)
+    mono = _nonfinite("mono_depth", np.asarray(scene.mono_depth, dtype=np.float32), cfg.nonfinite_depth)
+    ref = _nonfinite("ref_depth", ref, cfg.nonfinite_depth)
+    radius = cfg.scene_radius if cfg.scene_radius is not None else scene_radius_of(scene.scale_mat)
+    cfg = cfg.with_scene_radius(radius)
     timings: dict[str, float] = {}
     t_all = t0 = time.perf_counter()
     aligned, scale, shift, status = align_mono_depth_status(
-        mono, ref, cfg["align_mode"], border_px=int(cfg["align_border_px"]), min_pixels=int(cfg["align_min_pixels"])
+        mono, ref, cfg.align_mode, border_px=cfg.align_border_px, min_pixels=cfg.align_min_pixels
     )
     timings["align"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     assoc = associate_instances(
         scene.seg_masks, scene.seg_background, aligned, scene.intrinsics, scene.cam_to_world,
-        {k: cfg[k] for k in ASSOC_DEFAULTS},
+        cfg,
     )
     timings["segmentation"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     U, inst = estimate_uncertainty(
         aligned, assoc.global_ids, assoc.is_background, scene.intrinsics, scene.cam_to_world,
-        {k: cfg[k] for k in UNCERTAINTY_DEFAULTS}, np.random.default_rng(rng_seed),
+        cfg, np.random.default_rng(rng_seed),
     )
     timings["uncertainty"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_all
@@ -169,7 +145,7 @@ def run_uncertainty_stage(
         n_instances_failed=float(sum(r.status.startswith("failed") for r in fg)),
         n_align_fallback_views=float(np.sum(status == 2)),
         n_align_scale_only_views=float(np.sum(status == 1)),
-        scene_radius_m=float(cfg["scene_radius"]),
+        scene_radius_m=radius,
     )
     res = UncertaintyResult(
         uncertainty=U, instance_ids=assoc.global_ids, is_background=assoc.is_background, aligned_depth=aligned,

@@ -39,33 +39,13 @@ scene_radius``; ``vol_norm = vol_m / scene_radius^3``; ``r_m = r_norm * scene_ra
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
+from methods.monoinstance.config import UncertaintyStageConfig, load_stage_config
 from metrics.camera import backproject_pixels
-
-UNCERTAINTY_DEFAULTS: dict[str, Any] = {
-    "n_subsample": 20000,
-    "dbscan_eps": 0.04,
-    "dbscan_min_points": 4,
-    "dbscan_min_cluster_frac": 0.1,
-    "drop_dbscan_noise": False,
-    "sor_nb_neighbors": 20,
-    "sor_std_ratio": 2.0,
-    "obb_method": "pca",
-    "radius_offset": 0.01,
-    "use_radius_clamp": True,
-    "radius_clamp": [0.005, 0.07],
-    "density_cap": 2000,
-    "density_ref_points": 5000,  # speed option (None = the code); configs/methods/monoinstance_uncertainty.yaml
-    "max_density_frac": 0.8,
-    "min_views_per_instance": 2,
-    "min_instance_points": 20,
-    "failed_instance_u": 0.5,
-    "scene_radius": 1.0,
-}
-
 
 @dataclass
 class InstanceUncertainty:
@@ -99,7 +79,15 @@ def _obb_volume(pcd, method: str) -> float:
     return vol if np.isfinite(vol) else 0.0
 
 
-def clean_cloud(points: np.ndarray, cfg: dict[str, Any]) -> np.ndarray:
+def scene_radius(cfg: UncertaintyStageConfig) -> float:
+    """``cfg.scene_radius`` (metres per normalised unit), which the stage fills from the scene."""
+    if cfg.scene_radius is None:
+        raise ValueError("estimate_uncertainty needs scene_radius (metres per normalised unit); "
+                         "run_uncertainty_stage fills it from Scene.scale_mat")
+    return cfg.scene_radius
+
+
+def clean_cloud(points: np.ndarray, cfg: UncertaintyStageConfig) -> np.ndarray:
     """Step 4: DBSCAN small-group removal then statistical outlier removal (metres in, metres out).
 
     Args:
@@ -115,32 +103,32 @@ def clean_cloud(points: np.ndarray, cfg: dict[str, Any]) -> np.ndarray:
         return points.reshape(0, 3)
     pcd = o3d.geometry.PointCloud()
     pcd.points = o3d.utility.Vector3dVector(np.ascontiguousarray(points, dtype=np.float64))
-    eps = float(cfg["dbscan_eps"]) * float(cfg["scene_radius"])
-    labels = np.asarray(pcd.cluster_dbscan(eps=eps, min_points=int(cfg["dbscan_min_points"]))) + 1  # 0 = noise
+    eps = cfg.dbscan_eps * scene_radius(cfg)
+    labels = np.asarray(pcd.cluster_dbscan(eps=eps, min_points=cfg.dbscan_min_points)) + 1  # 0 = noise
     count = np.bincount(labels)
-    keep_label = count >= float(cfg["dbscan_min_cluster_frac"]) * labels.size
-    if cfg["drop_dbscan_noise"]:
+    keep_label = count >= cfg.dbscan_min_cluster_frac * labels.size
+    if cfg.drop_dbscan_noise:
         keep_label[0] = False
     idx = np.flatnonzero(keep_label[labels])
     if idx.size == 0:
         return points[:0]
     pcd = pcd.select_by_index(idx.tolist())
-    if idx.size > int(cfg["sor_nb_neighbors"]):
-        pcd, _ = pcd.remove_statistical_outlier(nb_neighbors=int(cfg["sor_nb_neighbors"]), std_ratio=float(cfg["sor_std_ratio"]))
+    if idx.size > cfg.sor_nb_neighbors:
+        pcd, _ = pcd.remove_statistical_outlier(nb_neighbors=cfg.sor_nb_neighbors, std_ratio=cfg.sor_std_ratio)
     return np.asarray(pcd.points)
 
 
-def ball_radius_norm(points_m: np.ndarray, cfg: dict[str, Any]) -> tuple[float, float]:
+def ball_radius_norm(points_m: np.ndarray, cfg: UncertaintyStageConfig) -> tuple[float, float]:
     """Step 5: (obb volume, ball radius), both in normalised units, of a cleaned cloud in metres."""
     import open3d as o3d
 
-    R = float(cfg["scene_radius"])
+    R = scene_radius(cfg)
     pcd = o3d.geometry.PointCloud()
     pcd.points = o3d.utility.Vector3dVector(np.ascontiguousarray(points_m / R, dtype=np.float64))
-    vol = _obb_volume(pcd, str(cfg["obb_method"]))
-    r = vol + float(cfg["radius_offset"])
-    if cfg["use_radius_clamp"]:
-        lo, hi = cfg["radius_clamp"]
+    vol = _obb_volume(pcd, cfg.obb_method)
+    r = vol + cfg.radius_offset
+    if cfg.use_radius_clamp:
+        lo, hi = cfg.radius_clamp
         r = min(max(r, float(lo)), float(hi))
     return vol, r
 
@@ -164,27 +152,13 @@ def certainty_from_densities(densities: list[np.ndarray], max_density_frac: floa
     return [np.clip(d.astype(np.float64) / (max_density_frac * mx + 1e-6), 0.0, 1.0) for d in densities]
 
 
-def _check_config(cfg: dict[str, Any]) -> None:
-    if cfg["obb_method"] not in ("pca", "minimal"):
-        raise ValueError(f"obb_method must be pca or minimal, got {cfg['obb_method']!r}")
-    if not (0.0 <= float(cfg["failed_instance_u"]) <= 1.0):
-        raise ValueError(f"failed_instance_u must be in [0, 1], got {cfg['failed_instance_u']}")
-    if float(cfg["scene_radius"]) <= 0 or not np.isfinite(float(cfg["scene_radius"])):
-        raise ValueError(f"scene_radius must be a positive number (metres per normalised unit), got {cfg['scene_radius']}")
-    if int(cfg["n_subsample"]) < 1:
-        raise ValueError(f"n_subsample must be >= 1, got {cfg['n_subsample']}")
-    lo, hi = cfg["radius_clamp"]
-    if not (0 < float(lo) <= float(hi)):
-        raise ValueError(f"radius_clamp must be [low, high] with 0 < low <= high, got {cfg['radius_clamp']}")
-
-
 def estimate_uncertainty(
     depth: np.ndarray,
     global_ids: np.ndarray,
     is_background: dict[int, bool],
     K: np.ndarray,
     cam_to_world: np.ndarray,
-    config: dict[str, Any] | None = None,
+    config: UncertaintyStageConfig | Mapping[str, Any] | None = None,
     rng: np.random.Generator | int | None = None,
 ) -> tuple[np.ndarray, dict[int, InstanceUncertainty]]:
     """Per-pixel uncertainty U = 1 - c from the multi-view density of each instance (module docstring).
@@ -194,8 +168,9 @@ def estimate_uncertainty(
         global_ids: (N, H, W) int multi-view consistent instance ids, 0 = none.
         is_background: global id -> True for background (ids absent from it count as foreground).
         K: (N, 3, 3) or (3, 3) intrinsics, pixels. cam_to_world: (N, 4, 4), OpenCV axes, metres.
-        config: keys of :data:`UNCERTAINTY_DEFAULTS` (others ignored). ``scene_radius`` converts the
-            code's normalised units (see module docstring).
+        config: the stage's config (:class:`methods.monoinstance.config.UncertaintyStageConfig`, or
+            overrides of its YAML). ``scene_radius`` (must be set here) converts the code's normalised
+            units (see module docstring).
         rng: ``numpy.random.Generator`` (or an int seed) for the subsampling; same seed, same U.
 
     Returns:
@@ -204,8 +179,8 @@ def estimate_uncertainty(
     """
     from scipy.spatial import cKDTree
 
-    cfg = {**UNCERTAINTY_DEFAULTS, **{k: v for k, v in (config or {}).items() if k in UNCERTAINTY_DEFAULTS}}
-    _check_config(cfg)
+    cfg = load_stage_config(config)
+    R = scene_radius(cfg)
     rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
     dep = np.asarray(depth)
     gids = np.asarray(global_ids)
@@ -218,8 +193,7 @@ def estimate_uncertainty(
         raise ValueError(f"cam_to_world must be ({n_views}, 4, 4), got {c2w.shape}")
     U = np.zeros(dep.shape, dtype=np.float32)
     valid = np.isfinite(dep) & (dep > 0)
-    fail_u = float(cfg["failed_instance_u"])
-    R = float(cfg["scene_radius"])
+    fail_u = cfg.failed_instance_u
     info: dict[int, InstanceUncertainty] = {}
 
     for g in (int(x) for x in np.unique(gids)):
@@ -247,35 +221,35 @@ def estimate_uncertainty(
             U[mask_g] = fail_u
             rec.mean_u = fail_u
 
-        if rec.n_views < int(cfg["min_views_per_instance"]):
-            fail(f"seen in {rec.n_views} view(s) < min_views_per_instance={cfg['min_views_per_instance']}")
+        if rec.n_views < cfg.min_views_per_instance:
+            fail(f"seen in {rec.n_views} view(s) < min_views_per_instance={cfg.min_views_per_instance}")
             continue
-        if rec.n_fused < int(cfg["min_instance_points"]):
-            fail(f"{rec.n_fused} fused points < min_instance_points={cfg['min_instance_points']}")
+        if rec.n_fused < cfg.min_instance_points:
+            fail(f"{rec.n_fused} fused points < min_instance_points={cfg.min_instance_points}")
             continue
         if not np.all(np.isfinite(fused)):
             fail("non-finite back-projected points (bad camera?)")
             continue
-        k = min(int(cfg["n_subsample"]), rec.n_fused)
+        k = min(cfg.n_subsample, rec.n_fused)
         sub = fused[np.sort(rng.choice(rec.n_fused, size=k, replace=False))]
         rec.n_subsampled = k
         clean = clean_cloud(sub, cfg)
         rec.n_clean = int(clean.shape[0])
-        if rec.n_clean < int(cfg["min_instance_points"]):
-            fail(f"{rec.n_clean} points left after cleaning < min_instance_points={cfg['min_instance_points']}")
+        if rec.n_clean < cfg.min_instance_points:
+            fail(f"{rec.n_clean} points left after cleaning < min_instance_points={cfg.min_instance_points}")
             continue
         rec.obb_volume_norm, rec.radius_norm = ball_radius_norm(clean, cfg)
         rec.radius_m = rec.radius_norm * R
-        ref, cap = clean, float(cfg["density_cap"])
-        if cfg["density_ref_points"] is not None and clean.shape[0] > int(cfg["density_ref_points"]):
+        ref, cap = clean, float(cfg.density_cap)
+        if cfg.density_ref_points is not None and clean.shape[0] > cfg.density_ref_points:
             # speed option: count neighbours in a uniform random subset; counts (and the cap) scale by
             # the kept fraction, which the max-normalisation of step 7 cancels up to sampling noise
-            keep = int(cfg["density_ref_points"])
+            keep = cfg.density_ref_points
             ref = clean[np.sort(rng.choice(clean.shape[0], size=keep, replace=False))]
             cap *= keep / clean.shape[0]
         tree = cKDTree(ref)
         dens = [np.minimum(tree.query_ball_point(p, rec.radius_m, return_length=True), cap) for *_, p in per_frame]
-        cert = certainty_from_densities(dens, float(cfg["max_density_frac"]))
+        cert = certainty_from_densities(dens, cfg.max_density_frac)
         if cert is None:
             fail("all densities are 0")
             continue

@@ -22,6 +22,7 @@ Geometric initialisation (IDR / MonoSDF): the network starts as a sphere SDF of 
 from __future__ import annotations
 
 import math
+from typing import cast
 
 import torch
 import torch.nn.functional as F
@@ -121,6 +122,7 @@ class SDFNetwork(torch.nn.Module):
         self.radius = float(radius)
         self.pe_frequencies = int(pe_frequencies)
         self.active_levels = spec.levels  # coarse-to-fine: features of finer levels read as 0 (set_active_levels)
+        self.pe_freqs: torch.Tensor  # registered buffer (below): declared for the type checker
         self.register_buffer("pe_freqs", 2.0 ** torch.arange(self.pe_frequencies, dtype=torch.float32), persistent=False)
         dims = [spec.out_dim + 3 * (1 + 2 * self.pe_frequencies)] + [hidden] * layers + [1 + geo_features]
         self.linears = torch.nn.ModuleList(torch.nn.Linear(dims[i], dims[i + 1]) for i in range(len(dims) - 1))
@@ -179,7 +181,8 @@ class SDFNetwork(torch.nn.Module):
         """IDR geometric init: a sphere SDF of radius r in normalised-by-R coordinates (grid features and
         positional-encoding frequencies start with zero first-layer weights: the MLP sees only x)."""
         r_norm = r / self.radius
-        for i, lin in enumerate(self.linears):
+        for i, module in enumerate(self.linears):
+            lin = cast(torch.nn.Linear, module)
             out_dim, in_dim = lin.weight.shape
             if i == len(self.linears) - 1:
                 mean = math.sqrt(math.pi) / math.sqrt(in_dim)
@@ -207,7 +210,7 @@ class SDFNetwork(torch.nn.Module):
         feat = self.level_mask(feat)
         jac = None if jac is None else self.level_mask(jac)  # (P, 3, L * F): the same mask on the last axis
         pe = self.encode(xs)  # (P, 3 + 6 F_pe)
-        first = self.linears[0]
+        first = cast(torch.nn.Linear, self.linears[0])
         a, slope = _softplus_and_slope(linear_blocks([feat, pe], first.weight, first.bias), self.grid.fast)  # no (P, in) concatenation
         slopes = [slope]
         for lin in self.linears[1:-1]:
@@ -219,11 +222,12 @@ class SDFNetwork(torch.nn.Module):
         grad = None
         if with_gradient:
             # explicit vector-Jacobian product of the SDF output (differentiable, first-order ops only)
-            g = self.linears[-1].weight[0].expand_as(slopes[-1])
+            g = cast(torch.nn.Linear, self.linears[-1]).weight[0].expand_as(slopes[-1])
             for lin, slope in zip(reversed(self.linears[1:-1]), reversed(slopes[1:])):
-                g = (g * slope) @ lin.weight  # (P, in)
+                g = (g * slope) @ cast(torch.Tensor, lin.weight)  # (P, in)
             g0 = g * slopes[0]  # (P, H): d sdf / d (first layer pre-activation)
-            w0 = self.linears[0].weight  # (H, L * F + 3 + 6 F_pe)
+            w0 = cast(torch.nn.Linear, self.linears[0]).weight  # (H, L * F + 3 + 6 F_pe)
+            assert jac is not None  # the grid returns the Jacobian when asked (with_jacobian=with_gradient)
             c = jac.shape[-1]
             # one product per input block (grid / encoding), then each block's own chain rule
             grad = jacobian_contract(jac, g0 @ w0[:, :c], self.grid.fast) + self.pe_chain(g0 @ w0[:, c:], pe)  # (P, 3); 1/R and x R cancel
@@ -233,6 +237,7 @@ class SDFNetwork(torch.nn.Module):
         clamp = sphere < sdf_net
         sdf = torch.where(clamp, sphere, sdf_net)
         if with_gradient:
+            assert grad is not None  # set above (same condition)
             grad = torch.where(clamp[:, None], -x / norm.clamp_min(1e-9)[:, None], grad)
         return sdf, geo, grad
 
@@ -280,9 +285,9 @@ class ColorNetwork(torch.nn.Module):
                 image: int | torch.Tensor | None = None) -> torch.Tensor:
         """x, view_dirs, normals: (P, 3); geo: (P, G); image: training slot whose code is used, an int or
         (P,) per point (None = the mean code, for views without one) -> rgb (P, 3) in [0, 1]."""
-        first = self.mlp[0]
+        first = cast(torch.nn.Linear, self.mlp[0])
         n_point = first.in_features - self.appearance_dim  # per-point inputs: x, view dir, normal, geo feature
-        bias = first.bias
+        bias: torch.Tensor = first.bias
         if self.appearance_dim:
             # the code is constant per image: its share of the first layer is a per-image bias
             # (W_code @ code + b), computed once per image instead of a (P, appearance_dim) input block

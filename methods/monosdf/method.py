@@ -7,20 +7,23 @@ Config: ``configs/methods/monosdf.yaml``. The no-prior ablation of Table 1 is th
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from typing import Any
 
+from bench.data.config import load_config
 from bench.data.scene import Scene
 from methods.base import Artifacts, ProgressFn
+from methods.monosdf.config import MonoSDFConfig
 from methods.monosdf.trainer import MonoSDFTrainer, train_with_snapshots
 from methods.registry import register
 
 
-def set_threads(cfg: dict[str, Any]) -> None:
-    """Torch intra-op threads from the config (0 = leave torch's default)."""
+def set_threads(threads: int) -> None:
+    """Torch intra-op threads (0 = leave torch's default)."""
     import torch
 
-    if int(cfg.get("threads", 0)) > 0:
-        torch.set_num_threads(int(cfg["threads"]))
+    if threads > 0:
+        torch.set_num_threads(threads)
 
 
 @register("monosdf")
@@ -28,17 +31,19 @@ class MonoSDF:
     """MonoSDF: VolSDF + monocular depth / normal priors (uniform weights, uniform ray sampling)."""
 
     name = "monosdf"
+    config_type = MonoSDFConfig
 
-    def fit(self, scene: Scene, config: dict[str, Any], seed: int, progress: ProgressFn | None = None) -> Artifacts:
-        set_threads(config)
+    def fit(self, scene: Scene, config: Mapping[str, Any], seed: int, progress: ProgressFn | None = None) -> Artifacts:
+        cfg = load_config(MonoSDFConfig, config, f"{self.name} config")
+        set_threads(cfg.threads)
         t0 = time.perf_counter()
-        trainer = MonoSDFTrainer(scene, config, seed)
+        trainer = MonoSDFTrainer(scene, cfg, seed)
         setup_s = time.perf_counter() - t0
-        snaps, train_s, mesh_s = train_with_snapshots(trainer, int(config["iterations"]), list(config["fractions"]),
-                                                      int(config["mesh_resolution"]), progress, start_seconds=setup_s)
+        snaps, train_s, mesh_s = train_with_snapshots(trainer, cfg.iterations, list(cfg.fractions),
+                                                      cfg.mesh_resolution, progress, start_seconds=setup_s)
         return Artifacts(
             snapshots=snaps,
             timings={"setup": setup_s, "train": train_s, "mesh": mesh_s},
             iterations=trainer.step_count,
-            extra={"beta": float(trainer.density.beta().detach()), "samples_per_ray": int(config["n_coarse"]) + int(config["n_fine"])},
+            extra={"beta": float(trainer.density.beta().detach()), "samples_per_ray": cfg.n_coarse + cfg.n_fine},
         )

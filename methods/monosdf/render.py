@@ -14,6 +14,7 @@ the SDF gradients used by the eikonal term.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal, overload
 
 import torch
 import torch.nn.functional as F
@@ -101,6 +102,21 @@ def sample_pdf(bins: torch.Tensor, weights: torch.Tensor, n: int, gen: torch.Gen
     return b0 + frac * (b1 - b0)
 
 
+@overload
+def hierarchical_samples(
+    sdf_net: SDFNetwork, density: LaplaceDensity, origins: torch.Tensor, dirs: torch.Tensor, far: torch.Tensor,
+    near: float, n_coarse: int, n_fine: int, gen: torch.Generator | None, jitter: bool, with_coarse_sdf: Literal[False] = ...,
+) -> torch.Tensor: ...
+@overload
+def hierarchical_samples(
+    sdf_net: SDFNetwork, density: LaplaceDensity, origins: torch.Tensor, dirs: torch.Tensor, far: torch.Tensor,
+    near: float, n_coarse: int, n_fine: int, gen: torch.Generator | None, jitter: bool, with_coarse_sdf: Literal[True],
+) -> tuple[torch.Tensor, torch.Tensor]: ...
+@overload
+def hierarchical_samples(
+    sdf_net: SDFNetwork, density: LaplaceDensity, origins: torch.Tensor, dirs: torch.Tensor, far: torch.Tensor,
+    near: float, n_coarse: int, n_fine: int, gen: torch.Generator | None, jitter: bool, with_coarse_sdf: bool = ...,
+) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]: ...
 @torch.no_grad()
 def hierarchical_samples(
     sdf_net: SDFNetwork, density: LaplaceDensity, origins: torch.Tensor, dirs: torch.Tensor, far: torch.Tensor,

@@ -16,14 +16,16 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, cast
 
 import numpy as np
 import torch
 import trimesh
 
+from bench.data.config import config_record
 from bench.data.scene import Scene
 from methods.base import Snapshot
+from methods.monosdf.config import MonoSDFConfig
 from methods.monosdf.field import ColorNetwork, LaplaceDensity, SDFNetwork
 from methods.monosdf.grid import make_grid_spec
 from methods.monosdf.losses import color_loss, eikonal_loss, normal_loss, smoothness_loss, ssi_depth_fit, ssi_depth_fit_code
@@ -73,45 +75,40 @@ def depth_edges(depth: np.ndarray, jump_m: float = 0.10) -> np.ndarray:
 class MonoSDFTrainer:
     """Holds the scene's training data, the networks and the optimiser."""
 
-    def __init__(self, scene: Scene, cfg: dict[str, Any], seed: int) -> None:
+    def __init__(self, scene: Scene, cfg: MonoSDFConfig, seed: int) -> None:
         self.scene, self.cfg, self.seed = scene, cfg, seed
         torch.manual_seed(seed)
         self.gen = torch.Generator().manual_seed(seed)
         self.views = scene.view_indices("train")
-        self.radius = float(cfg["bounding_sphere"])
+        self.radius = float(cfg.bounding_sphere)
         self.rays = build_rays(scene, self.views, self.radius)
         V, HW = len(self.views), scene.height * scene.width
         self.rgb = torch.from_numpy(scene.images[self.views].reshape(V, HW, 3).astype(np.float32))
         self.prior_depth = self._prior(scene.mono_depth, (V, HW))
         self.prior_normal = self._prior(scene.mono_normal, (V, HW, 3))
         self.prior_weight = torch.ones(V, HW)
-        fit = str(cfg.get("depth_fit", "ssi"))
-        if fit not in ("ssi", "metric"):
-            raise ValueError(f"depth_fit must be 'ssi' (MonoSDF) or 'metric' (diagnostic), got {fit!r}")
-        self.depth_fixed_scale = self.rays.scale if fit == "metric" else None  # metric: the scene's metres per unit
-        self.prior_loss_form = str(cfg.get("prior_loss_form", "monosdf"))
-        if self.prior_loss_form not in ("monosdf", "code"):
-            raise ValueError(f"prior_loss_form must be 'monosdf' or 'code' (the MonoInstance release's), got {self.prior_loss_form!r}")
-        self.prune_weight = float(cfg.get("prune_weight", 0.0) or 0.0)  # 0 = every sample with gradients (MonoSDF)
+        self.depth_fixed_scale = self.rays.scale if cfg.depth_fit == "metric" else None  # metric: the scene's metres per unit
+        self.prior_loss_form = cfg.prior_loss_form
+        self.prune_weight = cfg.prune_weight  # 0 = every sample with gradients (MonoSDF)
         self.pixel_sampler: PixelSampler = lambda v, n, g: torch.randint(0, HW, (n,), generator=g)  # noqa: E731
         self.extra_losses: list[Callable[..., dict[str, tuple[float, torch.Tensor]]]] = []
         self.diagnostic_sources: list[Callable[[], dict[str, float]]] = []  # their numbers join diagnostics() (MonoInstance's mask term)
 
-        spec = make_grid_spec(cfg["grid_levels"], cfg["grid_features"], cfg["grid_log2_table"], cfg["grid_base_res"], cfg["grid_max_res"])
-        self.sdf = SDFNetwork(spec, hidden=cfg["mlp_hidden"], layers=cfg["mlp_layers"], geo_features=cfg["geo_features"],
-                              radius=self.radius, init_radius=cfg["init_radius"], inside_out=resolve_inside_out(cfg["inside_out"], scene),
-                              fast_grid=cfg["fast_grid"], seed=seed, pe_frequencies=int(cfg.get("pe_frequencies", 0)))
-        self.color = ColorNetwork(cfg["geo_features"], cfg["color_hidden"], cfg["color_layers"],
-                                  appearance_dim=int(cfg.get("appearance_dim", 0)), num_images=V)
-        self.density = LaplaceDensity(cfg["beta_init"], cfg["beta_min"])
-        lr = float(cfg["lr"])
+        spec = make_grid_spec(cfg.grid_levels, cfg.grid_features, cfg.grid_log2_table, cfg.grid_base_res, cfg.grid_max_res)
+        self.sdf = SDFNetwork(spec, hidden=cfg.mlp_hidden, layers=cfg.mlp_layers, geo_features=cfg.geo_features,
+                              radius=self.radius, init_radius=cfg.init_radius, inside_out=resolve_inside_out(cfg.inside_out, scene),
+                              fast_grid=cfg.fast_grid, seed=seed, pe_frequencies=int(cfg.pe_frequencies))
+        self.color = ColorNetwork(cfg.geo_features, cfg.color_hidden, cfg.color_layers,
+                                  appearance_dim=int(cfg.appearance_dim), num_images=V)
+        self.density = LaplaceDensity(cfg.beta_init, cfg.beta_min)
+        lr = float(cfg.lr)
         mlp_params = [p for n, p in self.sdf.named_parameters() if not n.startswith("grid.")]
         # three groups as MonoSDF's optimiser (encoding x grid_lr_factor, networks, density); the density
         # (beta) group at lr x beta_lr_factor (MonoSDF: 1)
         self.optim = torch.optim.Adam([
-            {"params": [self.sdf.grid.table], "lr": lr * cfg["grid_lr_factor"]},
+            {"params": [self.sdf.grid.table], "lr": lr * cfg.grid_lr_factor},
             {"params": mlp_params + list(self.color.parameters()), "lr": lr},
-            {"params": list(self.density.parameters()), "lr": lr * float(cfg.get("beta_lr_factor", 1.0))},
+            {"params": list(self.density.parameters()), "lr": lr * float(cfg.beta_lr_factor)},
         ], betas=(0.9, 0.99), eps=1e-15, fused=True)
         self.base_lrs = [g["lr"] for g in self.optim.param_groups]
         self.fixed_lr: float | None = None  # set: the network lr from now on (no decay), other groups at their factors
@@ -134,44 +131,44 @@ class MonoSDFTrainer:
         (``RenderOutput.extra_grad``); ``t``: distances from :func:`hierarchical_samples` (None = sample here)."""
         r = self.rays
         return render_rays(self.sdf, self.color, self.density, r.origins[view], r.dirs[view, pixels], r.z_factor[view, pixels],
-                           r.far[view, pixels], r.world_to_cam_rot[view], self.cfg["near"], self.cfg["n_coarse"], self.cfg["n_fine"],
+                           r.far[view, pixels], r.world_to_cam_rot[view], self.cfg.near, self.cfg.n_coarse, self.cfg.n_fine,
                            self.gen, jitter, extra_points=extra_points, t=t, image=view, prune_weight=prune_weight,
                            coarse_sdf=coarse_sdf)
 
     def _set_levels(self) -> None:
         """Coarse-to-fine grid (``grid_levels_initial`` < ``grid_levels``): start with that many levels and
         add one every ``grid_level_every`` (a fraction of the schedule)."""
-        n0 = int(self.cfg.get("grid_levels_initial") or self.cfg["grid_levels"])
-        every = float(self.cfg.get("grid_level_every", 0.05))
-        frac = self.step_count / max(int(self.cfg["iterations"]), 1)
-        self.sdf.set_active_levels(n0 + (int(frac / every) if every > 0 else self.cfg["grid_levels"]))
+        n0 = int(self.cfg.grid_levels_initial or self.cfg.grid_levels)
+        every = float(self.cfg.grid_level_every)
+        frac = self.step_count / max(int(self.cfg.iterations), 1)
+        self.sdf.set_active_levels(n0 + (int(frac / every) if every > 0 else self.cfg.grid_levels))
 
     def _set_beta_floor(self) -> None:
         """``beta_floor``: beta >= beta_floor * (1 - t / beta_floor_until) + beta_min for the first
         ``beta_floor_until`` of the schedule (t = fraction done), then MonoSDF's beta_min: the surface
         stays soft while the objects are still to be carved out of free space (docs/monosdf.md, session 6)."""
-        floor, until = float(self.cfg.get("beta_floor", 0.0) or 0.0), float(self.cfg.get("beta_floor_until", 0.0) or 0.0)
-        frac = self.step_count / max(int(self.cfg["iterations"]), 1)
+        floor, until = float(self.cfg.beta_floor or 0.0), float(self.cfg.beta_floor_until or 0.0)
+        frac = self.step_count / max(int(self.cfg.iterations), 1)
         extra = floor * max(0.0, 1.0 - frac / until) if floor > 0 and until > 0 else 0.0
-        self.density.beta_min = float(self.cfg["beta_min"]) + extra
+        self.density.beta_min = float(self.cfg.beta_min) + extra
 
     def _set_lr(self) -> None:
         if self.fixed_lr is not None:  # a phase with its own learning rate (MonoInstance's code-only final phase)
             for g, base in zip(self.optim.param_groups, self.base_lrs):
-                g["lr"] = base * self.fixed_lr / float(self.cfg["lr"])  # every group keeps its factor to the network lr
+                g["lr"] = base * self.fixed_lr / float(self.cfg.lr)  # every group keeps its factor to the network lr
             return
-        frac = min(self.step_count / max(int(self.cfg["iterations"]), 1), 1.0)
-        decay = float(self.cfg["lr_decay"]) ** frac * max(self._warmup("lr_warmup"), 1e-2)
+        frac = min(self.step_count / max(int(self.cfg.iterations), 1), 1.0)
+        decay = float(self.cfg.lr_decay) ** frac * max(self._warmup("lr_warmup"), 1e-2)
         for g, base in zip(self.optim.param_groups, self.base_lrs):
             g["lr"] = base * decay
 
     def _warmup(self, key: str) -> float:
-        """Linear ramp of a loss weight from 0 at step 0 to 1 at ``cfg[key]`` (a fraction of the schedule;
-        0 = full weight from the start, MonoSDF)."""
-        frac = float(self.cfg.get(key, 0.0) or 0.0)
+        """Linear ramp of a loss weight from 0 at step 0 to 1 at the config's ``key`` (a fraction of the
+        schedule; 0 = full weight from the start, MonoSDF)."""
+        frac = float(getattr(self.cfg, key))
         if frac <= 0:
             return 1.0
-        return min(self.step_count / (frac * max(int(self.cfg["iterations"]), 1)), 1.0)
+        return min(self.step_count / (frac * max(int(self.cfg.iterations), 1)), 1.0)
 
     def _per_image_terms(self, view: int, pixels: torch.Tensor, out: RenderOutput) -> dict[str, tuple[float, torch.Tensor]]:
         """The loss terms fitted per image on the rays ``pixels`` of slot ``view``: the scale-and-shift-
@@ -181,19 +178,19 @@ class MonoSDFTrainer:
         terms: dict[str, tuple[float, torch.Tensor]] = {}
         w = self.prior_weight[view, pixels]
         code_form = self.prior_loss_form == "code"
-        if self.prior_depth is not None and cfg["depth_weight"] > 0:
+        if self.prior_depth is not None and cfg.depth_weight > 0:
             if code_form:
                 crosses = (out.sdf.detach() > 0).any(-1) & (out.sdf.detach() < 0).any(-1)
                 loss, scale = ssi_depth_fit_code(out.depth, self.prior_depth[view, pixels], w, crosses)
             else:
-                loss, scale = ssi_depth_fit(out.depth, self.prior_depth[view, pixels], w, str(cfg.get("depth_negative_scale", "keep")),
+                loss, scale = ssi_depth_fit(out.depth, self.prior_depth[view, pixels], w, str(cfg.depth_negative_scale),
                                             fixed_scale=self.depth_fixed_scale)
-            terms["depth"] = (float(cfg["depth_weight"]) * self._warmup("depth_warmup"), loss)
+            terms["depth"] = (float(cfg.depth_weight) * self._warmup("depth_warmup"), loss)
             self._depth_scales.append(float(scale))  # prior units per normalised unit (exact metric prior: the scene scale)
-        if self.prior_normal is not None and cfg["normal_weight"] > 0:
+        if self.prior_normal is not None and cfg.normal_weight > 0:
             l1, ang = normal_loss(out.normal, self.prior_normal[view, pixels], w, reduce="rays" if code_form else "weighted")
-            terms["normal_l1"] = (float(cfg["normal_weight"]), l1)
-            terms["normal_cos"] = (float(cfg["normal_weight"]), ang)
+            terms["normal_l1"] = (float(cfg.normal_weight), l1)
+            terms["normal_cos"] = (float(cfg.normal_weight), ang)
         for extra in self.extra_losses:
             terms.update(extra(self, view, pixels, out))
         return terms
@@ -211,7 +208,7 @@ class MonoSDFTrainer:
             if pick is None:
                 pick = out.weights.detach().argmax(-1)  # always rendered with gradients, also when pruned
             g_surf = out.grad[rows, pick]
-        terms["eikonal"] = (float(cfg["eikonal_weight"]), eikonal_loss(torch.cat([g_uni, g_surf])))
+        terms["eikonal"] = (float(cfg.eikonal_weight), eikonal_loss(torch.cat([g_uni, g_surf])))
         if smooth_w > 0:
             own = torch.cat([g_uni, g_surf]) if mode == "random" else g_uni  # random: the ray sample has a neighbour too
             terms["smooth"] = (smooth_w, smoothness_loss(own, g_extra[R:]))
@@ -226,7 +223,7 @@ class MonoSDFTrainer:
         if out.kept_index is not None:
             g = g[out.kept_index]
             g_neighbours = g_neighbours[out.kept_index] if smooth_w > 0 else g_neighbours
-        terms = {"eikonal": (float(cfg["eikonal_weight"]), eikonal_loss(g))}
+        terms = {"eikonal": (float(cfg.eikonal_weight), eikonal_loss(g))}
         if smooth_w > 0:
             terms["smooth"] = (smooth_w, smoothness_loss(g, g_neighbours))
         return terms
@@ -241,14 +238,14 @@ class MonoSDFTrainer:
         cfg = self.cfg
         self._set_levels()
         self._set_beta_floor()
-        k = max(1, int(cfg.get("images_per_batch", 1)))
+        k = max(1, int(cfg.images_per_batch))
         if view is not None:
             views = [int(view)]
         elif k == 1:
             views = [int(torch.randint(0, len(self.views), (1,), generator=self.gen))]
         else:
             views = torch.randperm(len(self.views), generator=self.gen)[: min(k, len(self.views))].tolist()
-        n_each = max(1, int(cfg["rays_per_batch"]) // len(views))
+        n_each = max(1, int(cfg.rays_per_batch) // len(views))
         groups = [(v, self.pixel_sampler(v, n_each, self.gen)) for v in views]
         slot = torch.cat([torch.full((len(p),), v, dtype=torch.long) for v, p in groups])
         pixels = torch.cat([p for _, p in groups])
@@ -257,9 +254,10 @@ class MonoSDFTrainer:
         origins, dirs = r.origins[slot], r.dirs[slot, pixels]
         # prune only while the last step left enough weightless samples to pay for the no-gradient pass
         prune = self.prune_weight if self._prunable_frac <= PRUNE_WORTH else 0.0
-        sampled = hierarchical_samples(self.sdf, self.density, origins, dirs, r.far[slot, pixels], cfg["near"], cfg["n_coarse"],
-                                       cfg["n_fine"], self.gen, True, with_coarse_sdf=prune > 0)
-        t, coarse_sdf = sampled if prune > 0 else (sampled, None)  # coarse_sdf: the sampler's SDF, reused by the pruning pass
+        sampled = hierarchical_samples(self.sdf, self.density, origins, dirs, r.far[slot, pixels], cfg.near, cfg.n_coarse,
+                                       cfg.n_fine, self.gen, True, with_coarse_sdf=prune > 0)
+        t, coarse_sdf = (cast("tuple[torch.Tensor, torch.Tensor]", sampled) if prune > 0
+                         else (cast(torch.Tensor, sampled), None))  # coarse_sdf: the sampler's SDF, reused by the pruning pass
         # eikonal points (MonoSDF): R uniform points in the bounding cube + one sample of each ray
         # (``eikonal_ray_sample``: "random" = MonoSDF, "max_weight" = the highest-weight sample; the ray
         # sample's gradient comes from the rendering itself); with ``smooth_weight`` > 0 also a neighbour of
@@ -267,18 +265,16 @@ class MonoSDFTrainer:
         # extra points ride in the rendering's SDF pass.
         uni = (torch.rand(R, 3, generator=self.gen) * 2 - 1) * self.radius
         rows = torch.arange(R)
-        mode = str(cfg.get("eikonal_ray_sample", "max_weight"))
-        if mode not in ("random", "max_weight", "all"):
-            raise ValueError(f"eikonal_ray_sample must be 'random', 'max_weight' or 'all' (the MonoInstance release), got {mode!r}")
-        smooth_w = float(cfg.get("smooth_weight", 0.0))
-        jit = float(cfg.get("smooth_jitter", 0.01))
+        mode = cfg.eikonal_ray_sample  # random | max_weight | all (checked by MonoSDFConfig)
+        smooth_w = float(cfg.smooth_weight)
+        jit = float(cfg.smooth_jitter)
         pick = torch.randint(0, t.shape[1], (R,), generator=self.gen) if mode == "random" else None
         extra = [uni]
         surf = None if pick is None else origins + dirs * t[rows, pick][:, None]  # the random ray sample (R, 3)
         # a pruned rendering has no gradient at most samples: the random ray sample then rides with the extras
         surf_in_extra = surf is not None and prune > 0
         if surf_in_extra:
-            extra.append(surf)
+            extra.append(cast(torch.Tensor, surf))  # surf_in_extra implies surf is not None
         if mode == "all":  # the release: every ray sample and a jittered neighbour of each, no uniform points
             extra = [torch.zeros(0, 3)]
             if smooth_w > 0:
@@ -291,7 +287,7 @@ class MonoSDFTrainer:
         single = len(views) == 1
         out = self.render_pixels(views[0] if single else slot, pixels, extra_points=torch.cat(extra), t=t, prune_weight=prune,
                                  coarse_sdf=coarse_sdf)
-        terms: dict[str, tuple[float, torch.Tensor]] = {"color": (float(cfg["color_weight"]), color_loss(out.rgb, self.rgb[slot, pixels]))}
+        terms: dict[str, tuple[float, torch.Tensor]] = {"color": (float(cfg.color_weight), color_loss(out.rgb, self.rgb[slot, pixels]))}
         g_extra = out.extra_grad
         assert g_extra is not None
         if mode == "all":
@@ -308,7 +304,7 @@ class MonoSDFTrainer:
         for name, items in per_image.items():
             terms[name] = (items[0][0], torch.stack([val for _, val in items]).mean())
 
-        loss = sum(wt * val for wt, val in terms.values())
+        loss = cast(torch.Tensor, sum(wt * val for wt, val in terms.values()))  # terms has "color": never the 0 start
         self._set_lr()
         self.optim.zero_grad(set_to_none=True)
         loss.backward()
@@ -322,10 +318,10 @@ class MonoSDFTrainer:
         stats = {"samples_weighted": float((out.weights.detach() > WEIGHTED_SAMPLE).sum(-1).float().mean()),
                  "samples_rendered": out.kept / R}  # per ray, with gradients (n_coarse + n_fine unless pruned)
         total = abs(logs["loss"])
-        for k, (wt, _) in terms.items():  # each weighted term's share of the total loss
-            stats[f"share_{k}"] = wt * logs[k] / total if total > 0 else 0.0
-        for k, v in {**logs, **stats}.items():
-            self._log_sums[k] = self._log_sums.get(k, 0.0) + v
+        for name, (wt, _) in terms.items():  # each weighted term's share of the total loss
+            stats[f"share_{name}"] = wt * logs[name] / total if total > 0 else 0.0
+        for name, value in {**logs, **stats}.items():
+            self._log_sums[name] = self._log_sums.get(name, 0.0) + value
         self._log_count += 1
         return logs
 
@@ -359,9 +355,9 @@ class MonoSDFTrainer:
             q1, q3 = np.percentile(self._depth_scales, [25, 75])
             out["depth_fit_scale_iqr"] = float(q3 - q1)  # spread of the per-batch fits: a consistent geometry fits one scale
         self._log_sums, self._log_count, self._depth_scales = {}, 0, []
-        k = int(self.cfg.get("diag_views", 0))
+        k = int(self.cfg.diag_views)
         if k > 0 and self.scene.gt_depth is not None:
-            stride = int(self.cfg.get("diag_stride", 2))
+            stride = int(self.cfg.diag_stride)
             errs, edge_flags, mesh_errs, ahead, gaps = [], [], [], [], []
             slots = np.unique(np.linspace(0, len(self.views) - 1, k).round().astype(int))
             mesh_depth = None
@@ -375,7 +371,7 @@ class MonoSDFTrainer:
                 pred = self.render_view_depth(int(slot), stride=stride)
                 errs.append(np.abs(pred - gt)[gt > 0])
                 edge_flags.append(depth_edges(self.scene.gt_depth[self.views[slot]])[::stride, ::stride][gt > 0])
-                dense = self.render_view_depth(int(slot), stride=stride, n_coarse=8 * int(self.cfg["n_coarse"]))
+                dense = self.render_view_depth(int(slot), stride=stride, n_coarse=8 * int(self.cfg.n_coarse))
                 gaps.append(np.abs(pred - dense)[gt > 0])
                 if mesh_depth is not None:
                     md = mesh_depth[i][::stride, ::stride]
@@ -409,7 +405,7 @@ class MonoSDFTrainer:
         E = ``mesh_extent`` (normalised units) when set, else the bounding-sphere radius R: an object
         scene whose sphere also holds the cameras extracts only around the object (cells of 2E/n)."""
         n = int(resolution)
-        extent = self.radius if self.cfg.get("mesh_extent") is None else min(float(self.cfg["mesh_extent"]), self.radius)
+        extent = self.radius if self.cfg.mesh_extent is None else min(float(self.cfg.mesh_extent), self.radius)
         lin = torch.linspace(-extent, extent, n)
         vals = torch.empty(n, n, n)
         for i in range(n):
@@ -442,13 +438,13 @@ class MonoSDFTrainer:
         for s in range(0, len(pix), chunk):
             p = pix[s : s + chunk]
             depth.append(render_depth(self.sdf, self.density, r.origins[view], r.dirs[view, p], r.z_factor[view, p], r.far[view, p],
-                                      self.cfg["near"], int(n_coarse or self.cfg["n_coarse"]), self.cfg["n_fine"]))
+                                      self.cfg.near, int(n_coarse or self.cfg.n_coarse), self.cfg.n_fine))
         return (torch.cat(depth) * r.scale).reshape(len(rows), len(cols)).numpy()
 
     # ------------------------------------------------------------------ checkpoints
     def state_dict(self) -> dict[str, Any]:
         return {"sdf": self.sdf.state_dict(), "color": self.color.state_dict(), "density": self.density.state_dict(),
-                "optim": self.optim.state_dict(), "step": self.step_count, "gen": self.gen.get_state(), "cfg": self.cfg, "seed": self.seed}
+                "optim": self.optim.state_dict(), "step": self.step_count, "gen": self.gen.get_state(), "cfg": config_record(self.cfg), "seed": self.seed}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.sdf.load_state_dict(state["sdf"])

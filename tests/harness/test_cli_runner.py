@@ -12,7 +12,8 @@ from bench.executors.local import LocalExecutor
 from bench.cli import main
 from bench.jobs import Job, JobPlan
 from bench.runner import job_id_for, plan_index, resolve_jobs, run_jobs
-from bench.tables import load_table_spec, plan_jobs
+from bench.pipeline import plan_jobs
+from bench.table_spec import load_table_spec
 from methods.registry import available_methods, method_config
 
 REPO = Path(__file__).resolve().parents[2]
@@ -27,6 +28,7 @@ def tiny_run(tmp_path_factory):
     return code, out / "tiny"
 
 
+@pytest.mark.slow
 def test_run_ablation_tiny_writes_table_with_oracle_row(tiny_run, capsys):
     code, out = tiny_run
     assert code == 0
@@ -48,6 +50,7 @@ def test_run_ablation_tiny_writes_table_with_oracle_row(tiny_run, capsys):
     assert (out / "ablation_reconstructions.png").stat().st_size > 5000
 
 
+@pytest.mark.slow
 def test_rerun_skips_finished_jobs(tiny_run):
     _, out = tiny_run
     files = {p: p.stat().st_mtime_ns for p in (out / "jobs").glob("*.json")}
@@ -56,6 +59,7 @@ def test_rerun_skips_finished_jobs(tiny_run):
     assert not [p for p in out.rglob("*.tmp")]
 
 
+@pytest.mark.slow
 def test_report_command_assembles_markdown(tiny_run):
     _, out = tiny_run
     assert main(["report", "--table", "ablation", "--scale", "tiny", "--out", str(out.parent)]) == 0
@@ -80,7 +84,8 @@ def test_failed_job_is_recorded_not_dropped(tmp_path):
     cfg = {**method_config("oracle_tsdf", "tiny"), "voxel_size": "not-a-number"}
     rows = run_jobs([Job(plan, cfg, "deadbeefdeadbeef")], tmp_path, show_progress=False)
     assert rows[0]["status"] == "failed"
-    assert rows[0]["error"]["type"] == "ValueError" and "Traceback" in rows[0]["error"]["traceback"]
+    assert rows[0]["error"]["type"] == "BenchInputError" and "Traceback" in rows[0]["error"]["traceback"]
+    assert "'voxel_size' must be a number" in rows[0]["error"]["message"]
     assert json.loads((tmp_path / "jobs" / "deadbeefdeadbeef.json").read_text())["status"] == "failed"
 
 
@@ -193,6 +198,7 @@ def test_failed_job_makes_run_exit_1_and_plain_log_has_a_line_per_job(tmp_path, 
     assert (tmp_path / "tiny" / "ablation.md").exists()
 
 
+@pytest.mark.slow
 def test_thread_count_is_in_the_job_id_and_the_newest_result_counts(tmp_path):
     """Results depend on the torch thread count (float sums in another order), so a row computed with
     1 thread is not reused by a run planning 2 (issue 'Hard to break', item 6); the table matches both by
@@ -208,7 +214,8 @@ def test_thread_count_is_in_the_job_id_and_the_newest_result_counts(tmp_path):
         run_jobs(jobs, tmp_path, show_progress=False)
         time.sleep(1.1)  # "created" has 1 s resolution
     assert len(list((tmp_path / "jobs").glob("*.json"))) == 2  # the 2-thread plan did not reuse the 1-thread row
-    from bench.report import build_table, collect_results
+    from bench.report import build_table
+    from bench.results_io import collect_results
 
     rep = build_table(spec, collect_results(tmp_path), "tiny", available_methods(), plans=plan_index(two))
     assert rep.n_superseded == 1 and len(rep.jobs) == 1 and rep.jobs.iloc[0]["job_id"] == two[0].job_id

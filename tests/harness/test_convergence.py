@@ -12,8 +12,10 @@ import pytest
 import yaml
 
 from bench.convergence import ConvergenceSpec, check_run, judge_row
-from bench.report import build_table, collect_results, to_markdown
-from bench.tables import load_table_spec
+from bench.results_io import collect_results
+from bench.table_markdown import to_markdown
+from bench.table_spec import load_table_spec
+from label_match import build_table_by_label
 
 F = ConvergenceSpec()  # F-score: flat 0.03, drop 0.05, seed std 0.03
 
@@ -88,7 +90,7 @@ def write_table(tmp_path: Path, curves: dict[str, list[float]], spec: dict[str, 
             (tmp_path / "res" / "jobs" / f"{row}-{seed}.json").write_text(json.dumps(j))
     p = tmp_path / "conv.yaml"
     p.write_text(yaml.safe_dump(spec, sort_keys=False))
-    return build_table(load_table_spec(p), collect_results(tmp_path / "res"), "small")
+    return build_table_by_label(load_table_spec(p), collect_results(tmp_path / "res"), "small")
 
 
 def test_a_claim_on_an_unconverged_row_is_undecided(tmp_path: Path) -> None:
@@ -123,5 +125,5 @@ def test_bad_convergence_block_names_the_key(tmp_path: Path) -> None:
     with pytest.raises(BenchInputError, match="convergence.flat"):
         load_table_spec(p)
     p.write_text(yaml.safe_dump({**SPEC, "convergence": {"metric": "fscore", "plateau": 0.1}}, sort_keys=False))
-    with pytest.raises(BenchInputError, match="unknown key"):
+    with pytest.raises(BenchInputError, match="unknown config key 'convergence.plateau'"):
         load_table_spec(p)

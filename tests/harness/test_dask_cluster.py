@@ -19,13 +19,18 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from bench.executors.dask import DaskExecutor
 from bench.executors.local import LocalExecutor
-from bench.report import build_table, collect_results
-from bench.runner import resolve_jobs, run_jobs
-from bench.tables import load_table_spec, plan_jobs
+from bench.pipeline import plan_jobs
+from bench.report import build_table
+from bench.results_io import collect_results
+from bench.runner import plan_index, resolve_jobs, run_jobs
+from bench.table_spec import load_table_spec
 from methods.registry import available_methods
+
+pytestmark = pytest.mark.slow  # end to end (pyproject's `slow` marker; skipped by the fast loop -m 'not slow')
 
 REPO = Path(__file__).resolve().parents[2]
 SEEDS = [0, 1, 2]
@@ -136,7 +141,7 @@ def test_cluster_survives_a_killed_worker_and_matches_local(tmp_path):
         # resubmitted after w1 died may get the whole machine
         assert all(1 <= r["torch_threads"] <= max(1, os.cpu_count() or 1) for r in stored)
         assert any(r["torch_threads"] == max(1, (os.cpu_count() or 1) // 2) for r in stored if r["attempts"] == 1)
-        report = build_table(spec, collect_results(out), "tiny", available_methods())
+        report = build_table(spec, collect_results(out), "tiny", available_methods(), plans=plan_index(jobs))
         oracle = spec.rows[0].label
         assert all(c.status == "complete" and c.n == len(SEEDS) for (row, _, _), c in report.cells.items()
                    if row == oracle and c.status != "not_reported")

@@ -62,6 +62,7 @@ def test_local_in_process_one_done_per_job(tmp_path):
     assert all(e.row["status"] == "ok" for e in done)
 
 
+@pytest.mark.slow
 def test_local_pool_retries_a_dead_worker_then_succeeds(tmp_path):
     jobs = [_job(0, "crash1"), _job(1, "ok"), _job(2, "ok")]
     events = _events(LocalExecutor(workers=2, retries=2, task=fake_task), jobs, tmp_path)
@@ -73,6 +74,7 @@ def test_local_pool_retries_a_dead_worker_then_succeeds(tmp_path):
     assert any(e.kind == "retry" and e.job.job_id == jobs[0].job_id for e in events)
 
 
+@pytest.mark.slow
 def test_local_pool_bounded_retries_then_a_clear_failure_row(tmp_path):
     jobs = [_job(0, "crash")]
     events = _events(LocalExecutor(workers=2, retries=1, task=fake_task), jobs, tmp_path)
@@ -83,6 +85,7 @@ def test_local_pool_bounded_retries_then_a_clear_failure_row(tmp_path):
     assert "died 2 time(s)" in row["error"]["message"]
 
 
+@pytest.mark.slow
 def test_run_jobs_writes_every_row_and_rerun_retries_only_lost_jobs(tmp_path):
     jobs = [_job(0, "crash"), _job(1, "ok"), _job(2, "ok")]
     ex = LocalExecutor(workers=2, retries=0, task=fake_task)
@@ -154,6 +157,7 @@ def _prepare(args):
     return sorted(p.name for p in Path(cache).iterdir() if not p.name.startswith("."))
 
 
+@pytest.mark.slow
 def test_two_workers_synthesising_the_same_dataset(tmp_path):
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
@@ -203,6 +207,7 @@ def test_pool_workers_get_their_share_of_threads(tmp_path):
     assert ex.threads == max(1, len(os.sched_getaffinity(0)) // 2)
 
 
+@pytest.mark.slow
 def test_sigterm_stops_the_workers(tmp_path):
     """A killed `bench run` (SIGTERM: `kill`, a CI timeout) exits 130 and leaves no worker training on."""
     import signal

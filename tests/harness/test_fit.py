@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 import trimesh
 from PIL import Image
 
@@ -45,6 +46,7 @@ def _hand_written_scannet_folder(root, with_gt_mesh: bool):
     return root
 
 
+@pytest.mark.slow
 def test_fit_on_a_hand_written_folder_with_and_without_gt(tmp_path, capsys):
     folder = _hand_written_scannet_folder(tmp_path / "room", with_gt_mesh=False)
     out = tmp_path / "fit"

@@ -12,7 +12,7 @@ def test_gt_cache_reuses_and_evicts_least_recently_used(monkeypatch):
 
     def get(name: str) -> str:
         scene = SimpleNamespace(root=None, name=name)
-        return evaluate._cached_gt("scannet", scene, {"v": 1}, (), lambda: calls.append(name) or f"gt-{name}")
+        return evaluate._cached_gt("scannet", scene, evaluate.LLFFParams("zero"), (), lambda: calls.append(name) or f"gt-{name}")
 
     assert [get(n) for n in "abc"] == ["gt-a", "gt-b", "gt-c"]
     assert get("a") == "gt-a" and calls == ["a", "b", "c"]  # a hit: nothing recomputed

@@ -36,6 +36,7 @@ def installed_plugin(tmp_path, monkeypatch):
     sys.modules.pop("bench_example_method", None)
 
 
+@pytest.mark.slow
 def test_plugin_method_is_listed_and_runs_in_a_table_given_by_path(installed_plugin, tmp_path, capsys):
     assert main(["list"]) == 0
     assert "metric_prior_tsdf" in capsys.readouterr().out
@@ -66,6 +67,7 @@ rows:
     assert not (out / "tiny" / "artifacts").exists()  # --no-artifacts
 
 
+@pytest.mark.slow
 def test_a_broken_plugin_is_one_clear_error(installed_plugin, capsys):
     (next(installed_plugin.glob("bench_example_method-*.dist-info")) / "entry_points.txt").write_text(
         "[monoinstance_bench.methods]\nbroken = bench_example_method:NoSuchClass\n")
@@ -74,6 +76,7 @@ def test_a_broken_plugin_is_one_clear_error(installed_plugin, capsys):
     assert len(err) == 1 and "plugin 'broken'" in err[0] and "NoSuchClass" in err[0]
 
 
+@pytest.mark.slow
 def test_a_table_may_name_a_dataset_folder_as_a_scene(tmp_path):
     """A user's own folder (here: a synthesised scene copied out of the cache, loaded as real data) as a
     table's scene; the job id follows the folder's bytes."""

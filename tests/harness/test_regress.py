@@ -13,8 +13,9 @@ import yaml
 from bench.cli import main
 from bench.data.errors import BenchInputError
 from bench.regress import RegressResult, compare, make_reference, summarise, to_markdown
-from bench.report import build_table, collect_results
-from bench.tables import TableSpec, load_table_spec
+from bench.results_io import collect_results
+from bench.table_spec import TableSpec, load_table_spec
+from label_match import build_table_by_label
 
 SPEC: dict[str, Any] = {
     "name": "abl", "title": "Regression test table", "paper_table": "Table 4",
@@ -57,7 +58,7 @@ def summary(spec: TableSpec, tmp_path: Path, name: str, jobs: list[dict[str, Any
     d.mkdir(parents=True)
     for j in jobs:
         (d / f"{j['job_id']}.json").write_text(json.dumps(j))
-    return build_table(spec, collect_results(d.parent), "small", ["mi"])
+    return build_table_by_label(spec, collect_results(d.parent), "small", ["mi"])
 
 
 def table(fs: dict[str, float], acc: float = 0.04, skip: set[str] = frozenset(), fail: set[str] = frozenset()):
@@ -153,6 +154,7 @@ def test_reference_refused_when_jobs_failed(spec, tmp_path):
         make_reference(spec, report)
 
 
+@pytest.mark.slow
 def test_regress_cli_exit_codes(tmp_path, capsys):
     """`bench regress` end to end at tiny scale: no reference -> skipped (0); --update-reference stores
     one; the same code passes (0); a reference tampered to look better makes it fail (1)."""
@@ -178,6 +180,7 @@ def test_regress_cli_exit_codes(tmp_path, capsys):
     assert "regressed" in text and "REGRESSION in ablation" in text
 
 
+@pytest.mark.slow
 def test_reference_from_stored_results_without_a_fresh_run(tmp_path):
     """`--from-results DIR` stores / checks a reference from a finished `bench run` (no job reruns)."""
     oracle = "Oracle: TSDF of GT depth (upper bound)"

@@ -10,10 +10,13 @@ import json
 import shutil
 from pathlib import Path
 
+import pytest
 import yaml
 
 import bench.cli as cli
 from bench.pipeline import SHIPPED_TABLES
+
+pytestmark = pytest.mark.slow  # end to end (pyproject's `slow` marker; skipped by the fast loop -m 'not slow')
 
 ROW = "+Mono Uncertainty"
 

@@ -1,4 +1,5 @@
-"""Aggregation, rendering and the claims check (bench/report.py) on synthetic result JSONs."""
+"""Aggregation, rendering and the claims check (bench/aggregate.py, bench/claims.py, bench/table_markdown.py,
+bench/report.py) on synthetic result JSONs."""
 
 from __future__ import annotations
 
@@ -13,8 +14,11 @@ import pytest
 import yaml
 
 from bench.data.errors import BenchInputError
-from bench.report import build_table, collect_results, render_report, to_markdown, write_table_outputs
-from bench.tables import TableSpec, load_table_spec
+from bench.report import render_report, write_table_outputs
+from bench.results_io import collect_results
+from bench.table_markdown import to_markdown
+from bench.table_spec import TableSpec, load_table_spec
+from label_match import build_table_by_label
 
 SPEC: dict[str, Any] = {
     "name": "abl",
@@ -104,7 +108,7 @@ def test_corrupt_json_names_the_file(tmp_path: Path) -> None:
 
 
 def test_mean_std_and_marks(spec: TableSpec, results: Path) -> None:
-    rep = build_table(spec, collect_results(results), "small", available_methods={"mi"})
+    rep = build_table_by_label(spec, collect_results(results), "small", available_methods={"mi"})
     full = rep.cells[("Full", "scannet", "fscore")]
     per_seed = [0.801, 0.811, 0.821]  # mean over the two scenes per seed
     assert full.mean == pytest.approx(np.mean(per_seed))
@@ -127,7 +131,7 @@ def test_superseded_results_use_the_latest(spec: TableSpec, results: Path) -> No
     newer["job_id"] = "rerun"
     newer["created"] = "2026-11-23T00:00:00"
     write_jobs(results, [newer])
-    rep = build_table(spec, collect_results(results), "small")
+    rep = build_table_by_label(spec, collect_results(results), "small")
     assert rep.cells[("Base", "scannet", "fscore")].status == "complete"
     assert rep.n_superseded == 1
 
@@ -137,7 +141,7 @@ def claim(rep: Any, cid: str) -> Any:
 
 
 def test_claims(spec: TableSpec, results: Path) -> None:
-    rep = build_table(spec, collect_results(results), "small", available_methods={"mi"})
+    rep = build_table_by_label(spec, collect_results(results), "small", available_methods={"mi"})
     assert claim(rep, "rises").verdict == "HELD"
     assert claim(rep, "rises").partial  # Base has a failed job
     assert "exceeds the combined spread" in claim(rep, "rises").details[0]
@@ -159,7 +163,7 @@ def test_better_claim_with_a_margin(tmp_path: Path, results: Path, margin: float
                       "metric": "fscore", "row_a": "Full", "row_b": "Base", "margin": margin}]
     p = tmp_path / "abl.yaml"
     p.write_text(yaml.safe_dump(obj))
-    rep = build_table(load_table_spec(p), collect_results(results), "small", available_methods={"mi"})
+    rep = build_table_by_label(load_table_spec(p), collect_results(results), "small", available_methods={"mi"})
     assert rep.claims[0].verdict == verdict
     assert "by more than" in rep.claims[0].details[0] and rep.claims[0].paper_verdict == "n/a"
     obj["claims"][0]["margin"] = -1
@@ -177,13 +181,13 @@ def test_greater_claim_on_extra_metrics(tmp_path: Path) -> None:
     p.write_text(yaml.safe_dump(obj))
     spec = load_table_spec(p)
     write_jobs(tmp_path / "r", [job("Full", s, seed, unc_thin=0.6, unc_plane=0.1) for s in ("s0", "s1") for seed in (0, 1, 2)])
-    rep = build_table(spec, collect_results(tmp_path / "r"), "small")
+    rep = build_table_by_label(spec, collect_results(tmp_path / "r"), "small")
     assert rep.claims[0].verdict == "HELD" and not rep.claims[0].partial
 
 
 def test_outputs_written_atomically(spec: TableSpec, results: Path, tmp_path: Path) -> None:
     out = tmp_path / "out"
-    rep = build_table(spec, collect_results(results), "small", available_methods={"mi"})
+    rep = build_table_by_label(spec, collect_results(results), "small", available_methods={"mi"})
     paths = write_table_outputs(rep, out)
     assert sorted(p.name for p in out.iterdir()) == sorted(
         ["abl.csv", "abl.md", "abl_time.csv", "abl_curve.csv", "abl_accuracy_vs_time.png"])  # no temp files left
@@ -212,14 +216,14 @@ def test_outputs_written_atomically(spec: TableSpec, results: Path, tmp_path: Pa
 
 def test_render_report_and_empty_results(spec: TableSpec, tmp_path: Path) -> None:
     out = tmp_path / "out"
-    path = render_report([spec], collect_results(tmp_path / "empty"), "small", out)
+    path = render_report([spec], collect_results(tmp_path / "empty"), "small", out, plans={spec.name: {}})
     text = path.read_text()
     assert "# MonoInstance benchmark report" in text and "Ablation test table" in text
     assert "0 ok, 0 failed, 24 pending of 24 expected jobs" in text
     assert (out / "abl_accuracy_vs_time.png").exists()
     assert not [p for p in out.iterdir() if p.name.startswith(".")]
     with pytest.raises(BenchInputError, match="no scale 'tiny'"):
-        render_report([spec], collect_results(tmp_path / "empty"), "tiny", out)
+        render_report([spec], collect_results(tmp_path / "empty"), "tiny", out, plans={spec.name: {}})
 
 
 def test_groups_sharing_a_dataset_split_by_overrides(tmp_path: Path) -> None:
@@ -242,7 +246,7 @@ def test_groups_sharing_a_dataset_split_by_overrides(tmp_path: Path) -> None:
                 j["metrics"]["fscore"] += bump
                 jobs.append(j)
     write_jobs(tmp_path / "r", jobs)
-    rep = build_table(spec, collect_results(tmp_path / "r"), "small")
+    rep = build_table_by_label(spec, collect_results(tmp_path / "r"), "small")
     a, b = rep.cells[("Full", "p1", "fscore")], rep.cells[("Full", "p2", "fscore")]
     assert a.n == b.n == 6 and b.mean - a.mean == pytest.approx(0.1)
     assert math.isfinite(a.std)
@@ -251,14 +255,15 @@ def test_groups_sharing_a_dataset_split_by_overrides(tmp_path: Path) -> None:
 def test_shipped_specs_render_without_results(tmp_path: Path) -> None:
     configs = Path(__file__).resolve().parents[2] / "configs" / "tables"
     specs = [load_table_spec(p) for p in sorted(configs.glob("*.yaml"))]
-    path = render_report(specs, collect_results(tmp_path), "tiny", tmp_path / "out", available_methods={"oracle_tsdf"})
+    path = render_report(specs, collect_results(tmp_path), "tiny", tmp_path / "out", available_methods={"oracle_tsdf"},
+                         plans={s.name: {} for s in specs})
     text = path.read_text()
     assert "pending (method not implemented yet)" in text and "UNDECIDED" in text
 
 
 def test_paper_unit_is_shown_and_kept_in_csv(tmp_path: Path) -> None:
     dtu = load_table_spec(Path(__file__).resolve().parents[2] / "configs" / "tables" / "dtu.yaml")
-    rep = build_table(dtu, collect_results(tmp_path), "tiny")
+    rep = build_table_by_label(dtu, collect_results(tmp_path), "tiny")
     md = to_markdown(rep)
     assert "CD ↓ [m; paper: mm]" in md and "| 1.18 " in md
     paper = rep.tidy[rep.tidy["source"] == "paper"]

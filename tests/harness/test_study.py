@@ -25,6 +25,7 @@ def test_parse_sweep():
     assert parse_sweep(None) == (None, [None])
 
 
+@pytest.mark.slow
 def test_study_cli_writes_curves_with_diagnostics(tmp_path):
     out = tmp_path / "study"
     rc = main(["study", "convergence", "monosdf", "scannet_like_tiny", "--scale", "tiny", "--seeds", "0", "--snapshots", "2",
@@ -51,6 +52,7 @@ def test_study_bad_key_is_one_clear_error(tmp_path, capsys):
     assert not (tmp_path / "x").exists()
 
 
+@pytest.mark.slow
 def test_stop_at_trains_only_the_early_part_of_the_same_schedule(tmp_path):
     out = tmp_path / "screen"
     rc = main(["study", "convergence", "monosdf", "scannet_like_tiny", "--scale", "tiny", "--seeds", "0", "--snapshots", "4",

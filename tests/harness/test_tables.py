@@ -1,4 +1,4 @@
-"""Table spec parsing and validation (bench/tables.py)."""
+"""Table spec parsing and validation (bench/table_spec.py), and job planning (bench/pipeline.py)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,8 @@ import pytest
 import yaml
 
 from bench.data.errors import BenchInputError
-from bench.tables import list_tables, load_table_spec, parse_table_spec, plan_jobs, resolve
+from bench.pipeline import plan_jobs
+from bench.table_spec import list_tables, load_table_spec, parse_table_spec, resolve
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 SHIPPED = ["ablation", "dense", "dtu", "llff", "priors"]
@@ -115,21 +116,23 @@ def _mutate(path: str, value: Any, delete: bool = False) -> dict[str, Any]:
 
 
 @pytest.mark.parametrize("path,value,delete,match", [
-    ("colour", "x", False, r"unknown key\(s\) \['colour'\]"),
-    ("datasets/0/columns/0/direction", "down", False, r"datasets\[0\]\.columns\[0\]\.direction: unknown value 'down'"),
-    ("datasets/0/columns/0/colour", 1, False, r"columns\[0\]: unknown key"),
+    ("colour", "x", False, r"unknown config key 'colour' \(known: anchors, claims"),
+    ("datasets/0/columns/0/direction", "down", False, r"config key 'datasets\[0\]\.columns\[0\]\.direction' must be one of 'lower', 'higher' \(got 'down'\)"),
+    ("datasets/0/columns/0/colour", 1, False, r"unknown config key 'datasets\[0\]\.columns\[0\]\.colour' of Column"),
     ("datasets/0/dataset", "kitti", False, r"datasets\[0\]\.dataset: unknown value 'kitti'"),
     ("datasets/0/scenes/small", None, True, r"datasets\[0\]\.scenes: missing scale\(s\) \['small'\]"),
     ("seeds/small", [0, 0], False, r"seeds\.small: duplicate"),
     ("seeds/tiny", ["0"], False, r"seeds\.tiny: seeds must be integers"),
-    ("rows/0/method", None, True, r"rows\[0\]: missing key\(s\) \['method'\]"),
+    ("rows/0/method", None, True, r"config key 'rows\[0\]\.method' has no value"),
+    ("rows/0/paper", {"scannet": {"acc": "x"}}, False, r"config key 'rows\[0\]\.paper\.scannet\.acc' must be a number or null"),
     ("rows/0/paper", {"replica": {"acc": 1}}, False, r"rows\[0\]\.paper\.replica: unknown group"),
     ("rows/0/paper", {"scannet": {"psnr": 1}}, False, r"rows\[0\]\.paper\.scannet\.psnr: unknown column"),
     ("rows/1/label", "A", False, r"rows: duplicate row label"),
     ("claims/0/row_b", "Z", False, r"claims\[0\]: unknown row 'Z'"),
     ("claims/0/metric", "psnr", False, r"claims\[0\]\.metric: unknown metric 'psnr'"),
     ("claims/0/group", "replica", False, r"claims\[0\]\.group: unknown group"),
-    ("claims/1/direction", "up", False, r"claims\[1\]\.direction: unknown value 'up'"),
+    ("claims/1/direction", "up", False, r"config key 'claims\[1\]\.direction' must be one of 'increasing', 'decreasing' \(got 'up'\)"),
+    ("claims/1/margin", 0.1, False, r"unknown config key 'claims\[1\]\.margin'"),  # a keyword of another claim kind
     ("claims/1/kind", "roughly", False, r"claims\[1\]\.kind: unknown value 'roughly'"),
     ("claims/2/metric_b", "nope", False, r"claims\[2\]\.metric: unknown metric 'nope'"),
     ("claims/0/metric", "unc", False, r"claims\[0\]\.direction: 'unc' is not a column"),
@@ -180,5 +183,5 @@ def test_paper_only_claim_metric_rejected(tmp_path: Path) -> None:
 
 
 def test_parse_in_memory_names_where() -> None:
-    with pytest.raises(BenchInputError, match=r"^here: missing key"):
+    with pytest.raises(BenchInputError, match=r"^here: config key 'title' has no value"):
         parse_table_spec({"name": "x"}, "here")

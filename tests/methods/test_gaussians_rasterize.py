@@ -170,6 +170,7 @@ def test_empty_input():
     assert out["color"].shape == (4, 4, 3) and torch.all(out["alpha"] == 0)
 
 
+@pytest.mark.slow
 def test_thousands_of_gaussians_on_one_pixel():
     """5000 Gaussians stacked on the centre pixel: the cut-off stops at T < 1e-4, matching the reference."""
     n, W, H = 5000, 5, 5

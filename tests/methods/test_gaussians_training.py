@@ -24,14 +24,16 @@ def test_registered_as_one_family():
 
 
 def test_configs_differ_only_in_variant_keys():
-    data = {n: yaml.safe_load((CONFIG_DIR / f"{n}.yaml").read_text()) for n in ("gs3d", "fsgs", "monoinstance_gs")}
-    base = data["gs3d"]
-    for name, d in data.items():
-        assert d["scales"] == base["scales"], name
-        diff = {k for k in set(d["defaults"]) | set(base["defaults"]) if d["defaults"].get(k) != base["defaults"].get(k)}
-        assert diff <= VARIANT_KEYS, (name, diff)
-    assert data["fsgs"]["defaults"]["depth_loss"] == "pearson" and not data["fsgs"]["defaults"]["uncertainty"]
-    assert data["monoinstance_gs"]["defaults"]["uncertainty"] and data["monoinstance_gs"]["defaults"]["mask_constraint"]
+    """One preset (gs3d.yaml) for the family: the variants inherit it and declare only their switches."""
+    for name in ("fsgs", "monoinstance_gs"):
+        raw = yaml.safe_load((CONFIG_DIR / f"{name}.yaml").read_text())
+        assert raw["base"] == "gs3d" and set(raw["defaults"]) <= VARIANT_KEYS, name
+        assert not any(raw["scales"].values()), name  # no scale preset of its own
+        for scale in ("tiny", "small", "medium", "large"):
+            mine, base = method_config(name, scale), method_config("gs3d", scale)
+            assert set(mine) == set(base) and {k for k in mine if mine[k] != base[k]} <= VARIANT_KEYS, (name, scale)
+    assert method_config("fsgs", "small")["depth_loss"] == "pearson" and not method_config("fsgs", "small")["uncertainty"]
+    assert method_config("monoinstance_gs", "small")["uncertainty"] and method_config("monoinstance_gs", "small")["mask_constraint"]
 
 
 def test_pearson_is_affine_invariant_and_weighted():
@@ -108,22 +110,16 @@ def test_strategy_grows_prunes_and_keeps_adam_state_aligned():
         assert opts[k].param_groups[0]["params"][0] is v
 
 
-@pytest.fixture(scope="module")
-def tiny_scene():
-    from bench.data.datasets import load_dataset
-
-    return load_dataset("llff_like_0", "tiny")
-
-
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["gs3d", "fsgs", "monoinstance_gs"])
-def test_tiny_end_to_end(tiny_scene, name):
+def test_tiny_end_to_end(llff_tiny_scene, name):
     cfg = method_config(name, "tiny", {"iterations": 24, "refine_start": 4, "refine_every": 4, "sh_increase_every": 8,
                                        "init_max_points": 300, "init_random": 100, "init_depths": 8})
-    art = get_method(name).fit(tiny_scene, cfg, seed=0)
-    test = tiny_scene.view_indices("test")
+    art = get_method(name).fit(llff_tiny_scene, cfg, seed=0)
+    test = llff_tiny_scene.view_indices("test")
     assert [s.fraction for s in art.snapshots] == [0.25, 0.5, 1.0]
     r = art.final.renders
-    assert r.shape == (len(test), tiny_scene.height, tiny_scene.width, 3) and r.dtype == np.float32
+    assert r.shape == (len(test), llff_tiny_scene.height, llff_tiny_scene.width, 3) and r.dtype == np.float32
     assert np.isfinite(r).all() and r.min() >= 0 and r.max() <= 1
     assert {"init", "train", "uncertainty", "render"} <= set(art.timings)
     if name == "monoinstance_gs":
@@ -131,14 +127,15 @@ def test_tiny_end_to_end(tiny_scene, name):
         assert art.timings["uncertainty"] > 0
 
 
-def test_deterministic_for_a_seed(tiny_scene):
+@pytest.mark.slow
+def test_deterministic_for_a_seed(llff_tiny_scene):
     cfg = method_config("fsgs", "tiny", {"iterations": 10, "init_max_points": 200, "init_random": 50, "init_depths": 8})
-    a = get_method("fsgs").fit(tiny_scene, cfg, seed=3).final.renders
-    b = get_method("fsgs").fit(tiny_scene, cfg, seed=3).final.renders
+    a = get_method("fsgs").fit(llff_tiny_scene, cfg, seed=3).final.renders
+    b = get_method("fsgs").fit(llff_tiny_scene, cfg, seed=3).final.renders
     assert np.allclose(a, b, atol=1e-5)
 
 
-def test_mask_constraint_without_uncertainty_is_an_error(tiny_scene):
-    cfg = method_config("gs3d", "tiny", {"mask_constraint": True, "iterations": 4})
-    with pytest.raises(ValueError, match="mask_constraint"):
-        get_method("gs3d").fit(tiny_scene, cfg, seed=0)
+def test_mask_constraint_without_uncertainty_is_an_error():
+    """Caught when the config is resolved, before any job runs (the typed config's check)."""
+    with pytest.raises(ValueError, match="mask_constraint needs uncertainty"):
+        method_config("gs3d", "tiny", {"mask_constraint": True, "iterations": 4})

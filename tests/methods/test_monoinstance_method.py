@@ -2,20 +2,15 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import torch
 
 from methods.monoinstance.method import certainty_weights
 from methods.monoinstance.sampling import GuidedSampler
-from methods.registry import method_config
-
-
-@pytest.fixture(scope="module")
-def tiny_scene():
-    from bench.data.datasets import load_dataset
-
-    return load_dataset("scannet_like_tiny", "tiny")
+from methods.registry import method_config, typed_method_config
 
 
 def test_ablation_rows_are_configs_of_one_method():
@@ -53,6 +48,7 @@ def test_guided_sampler_allocates_by_area_and_prefers_uncertain_pixels():
     np.testing.assert_array_equal(pix, again)  # deterministic
 
 
+@pytest.mark.slow
 def test_monoinstance_fit_runs_two_stages_with_all_modules(tiny_scene):
     from methods.monoinstance.method import MonoInstance
 
@@ -70,12 +66,12 @@ def test_mask_constraint_loss_is_finite_and_reaches_the_sdf(tiny_scene):
     from methods.monoinstance.mask_constraint import MaskConstraint
     from methods.monosdf.trainer import MonoSDFTrainer
 
-    cfg = method_config("monoinstance", "tiny", {"rays_per_batch": 64})
+    cfg = typed_method_config("monoinstance", "tiny", {"rays_per_batch": 64})
     tr = MonoSDFTrainer(tiny_scene, cfg, seed=0)
     ids = tiny_scene.gt_instance[tr.views]
     bg = {i: info.is_background for i, info in tiny_scene.instances.items()}
     untrusted = np.isin(ids, [i for i, b in bg.items() if not b])  # every foreground ray is "untrusted"
-    mc = MaskConstraint(tr, ids, bg, untrusted, {**cfg, "mask_max_ray_dist": 1.0, "mask_min_views": 2})
+    mc = MaskConstraint(tr, ids, bg, untrusted, replace(cfg, mask_max_ray_dist=1.0, mask_min_views=2))
     assert mc.sources, "no instance found nearby views"
     (view, k), _ = next(iter(mc.sources.items()))
     pixels = torch.from_numpy(np.flatnonzero(ids[view] == k)[:64])
@@ -96,12 +92,12 @@ def test_mask_constraint_options_and_diagnostics(tiny_scene):
     from methods.monoinstance.mask_constraint import MaskConstraint
     from methods.monosdf.trainer import MonoSDFTrainer
 
-    cfg = method_config("monoinstance", "tiny", {"rays_per_batch": 64})
+    cfg = typed_method_config("monoinstance", "tiny", {"rays_per_batch": 64})
     tr = MonoSDFTrainer(tiny_scene, cfg, seed=0)
     ids = tiny_scene.gt_instance[tr.views]
     bg = {i: info.is_background for i, info in tiny_scene.instances.items()}
     untrusted = np.isin(ids, [i for i, b in bg.items() if not b])
-    base = {**cfg, "mask_max_ray_dist": 1.0, "mask_min_views": 2, "mask_source_choice": "nearest"}  # the same sources in every call
+    base = replace(cfg, mask_max_ray_dist=1.0, mask_min_views=2, mask_source_choice="nearest")  # the same sources in every call
     view = next(iter(MaskConstraint(tr, ids, bg, untrusted, base).sources))[0]
     pixels = torch.randperm(ids[view].size, generator=torch.Generator().manual_seed(0))[:256]
     with torch.no_grad():
@@ -109,7 +105,7 @@ def test_mask_constraint_options_and_diagnostics(tiny_scene):
     results = {}
     for norm in ("code", "ours"):
         for hit in (0.0, 0.5):
-            mc = MaskConstraint(tr, ids, bg, untrusted, {**base, "mask_normalisation": norm, "mask_hit_threshold": hit})
+            mc = MaskConstraint(tr, ids, bg, untrusted, replace(base, mask_normalisation=norm, mask_hit_threshold=hit))
             loss = float(mc(tr, view, pixels, out)["mask"][1])
             results[norm, hit] = (loss, mc.diagnostics())
     for hit in (0.0, 0.5):
@@ -120,12 +116,12 @@ def test_mask_constraint_options_and_diagnostics(tiny_scene):
     assert diag0["mask_untrusted_rays"] > 0
     assert 0.0 < diag0["mask_wvalid_mean"] <= 1.0 + 1e-5 and -1.0 <= diag0["mask_color_gap"] <= 1.0
     assert mc.diagnostics() == {}  # reset by the call above
-    ren = MaskConstraint(tr, ids, bg, untrusted, {**base, "mask_renormalise": True})
+    ren = MaskConstraint(tr, ids, bg, untrusted, replace(base, mask_renormalise=True))
     float(ren(tr, view, pixels, out)["mask"][1])
     gap = ren.diagnostics()["mask_color_gap"]
     assert abs(gap) < abs(diag0["mask_color_gap"]) + 1e-6 or abs(gap) < 0.05  # the darkening bias is gone
     with pytest.raises(ValueError, match="mask_normalisation"):
-        MaskConstraint(tr, ids, bg, untrusted, {**base, "mask_normalisation": "paper"})
+        typed_method_config("monoinstance", "tiny", {"mask_normalisation": "paper"})
 
 
 def test_mask_sources_are_drawn_among_the_valid_views_and_rays_come_from_eroded_masks(tiny_scene):
@@ -139,12 +135,12 @@ def test_mask_sources_are_drawn_among_the_valid_views_and_rays_come_from_eroded_
     assert (er[0] == 3).sum() == 2 * 3 and (er[0] == 5).sum() == 6 and set(np.unique(er)) <= {0, 3, 5}
     assert (eroded_instances(ids, 0) == ids).all()
 
-    cfg = method_config("monoinstance", "tiny", {"rays_per_batch": 64})
+    cfg = typed_method_config("monoinstance", "tiny", {"rays_per_batch": 64})
     tr = MonoSDFTrainer(tiny_scene, cfg, seed=0)
     tids = tiny_scene.gt_instance[tr.views]
     bg = {i: info.is_background for i, info in tiny_scene.instances.items()}
     untrusted = np.isin(tids, [i for i, b in bg.items() if not b])
-    mc = MaskConstraint(tr, tids, bg, untrusted, {**cfg, "mask_max_ray_dist": 1.0, "mask_min_views": 2, "mask_n_source": 2})
+    mc = MaskConstraint(tr, tids, bg, untrusted, replace(cfg, mask_max_ray_dist=1.0, mask_min_views=2, mask_n_source=2))
     key = max(mc.candidates, key=lambda kv: len(mc.candidates[kv]))
     draws = [tuple(mc._choose_sources(*key, tr.gen)) for _ in range(40)]
     assert all(len(d) == 2 and set(d) <= set(mc.candidates[key]) for d in draws)
@@ -157,11 +153,11 @@ def test_final_phase_learning_rate_holds_every_group_at_its_factor(tiny_scene):
     keeps its factor to the network lr (grid x grid_lr_factor), no decay."""
     from methods.monosdf.trainer import MonoSDFTrainer
 
-    cfg = method_config("monoinstance", "tiny", {"rays_per_batch": 32})
+    cfg = typed_method_config("monoinstance", "tiny", {"rays_per_batch": 32})
     tr = MonoSDFTrainer(tiny_scene, cfg, seed=0)
     tr.step()
-    tr.fixed_lr = float(cfg["final_phase_lr"])
+    tr.fixed_lr = cfg.final_phase_lr
     for _ in range(2):
         tr.step()
         lrs = [g["lr"] for g in tr.optim.param_groups]
-        assert lrs[0] == pytest.approx(1e-5 * float(cfg["grid_lr_factor"])) and lrs[1] == pytest.approx(1e-5)
+        assert lrs[0] == pytest.approx(1e-5 * cfg.grid_lr_factor) and lrs[1] == pytest.approx(1e-5)

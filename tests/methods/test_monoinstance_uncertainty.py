@@ -12,7 +12,6 @@ import dataclasses
 import numpy as np
 import pytest
 
-from bench.data.datasets import load_dataset
 from methods.monoinstance import (
     adjusted_rand_index,
     align_mono_depth,
@@ -20,26 +19,21 @@ from methods.monoinstance import (
     associate_instances,
     certainty_from_densities,
     estimate_uncertainty,
-    load_stage_defaults,
+    load_stage_config,
     purity,
-    resolve_stage_config,
     run_uncertainty_stage,
     save_uncertainty_maps,
     split_stage_config,
+    stage_defaults,
 )
-from methods.monoinstance.association import ASSOC_DEFAULTS
-from methods.monoinstance.stage import ALIGN_KEYS, scene_radius_of
-from methods.monoinstance.uncertainty import UNCERTAINTY_DEFAULTS, ball_radius_norm
+from methods.monoinstance.config import UncertaintyStageConfig
+from methods.monoinstance.stage import scene_radius_of
+from methods.monoinstance.uncertainty import ball_radius_norm
 
 
 @pytest.fixture(scope="module")
-def tiny():
-    return load_dataset("scannet_like_tiny", "tiny")
-
-
-@pytest.fixture(scope="module")
-def tiny_result(tiny):
-    return run_uncertainty_stage(tiny, tiny.gt_depth, {}, rng_seed=0)
+def tiny_result(tiny_scene):
+    return run_uncertainty_stage(tiny_scene, tiny_scene.gt_depth, {}, rng_seed=0)
 
 
 # ----------------------------------------------------------------- hand-built scenes
@@ -113,11 +107,11 @@ def test_ari_purity_reference_values():
 
 
 # ----------------------------------------------------------------- association
-def test_association_on_tiny_scene_against_gt(tiny):
-    al, _, _ = align_mono_depth(tiny.mono_depth, tiny.gt_depth, "scale")
-    a = associate_instances(tiny.seg_masks, tiny.seg_background, al, tiny.intrinsics, tiny.cam_to_world, {})
-    gt = tiny.gt_instance
-    bg = [i for i, v in tiny.instances.items() if v.is_background]
+def test_association_on_tiny_scene_against_gt(tiny_scene):
+    al, _, _ = align_mono_depth(tiny_scene.mono_depth, tiny_scene.gt_depth, "scale")
+    a = associate_instances(tiny_scene.seg_masks, tiny_scene.seg_background, al, tiny_scene.intrinsics, tiny_scene.cam_to_world, {})
+    gt = tiny_scene.gt_instance
+    bg = [i for i, v in tiny_scene.instances.items() if v.is_background]
     m = gt > 0
     fg = m & ~np.isin(gt, bg)
     # measured 0.994 / 0.734 / 0.946 (greedy, defaults): floors a bit below
@@ -125,16 +119,16 @@ def test_association_on_tiny_scene_against_gt(tiny):
     assert adjusted_rand_index(a.global_ids[m], gt[m]) > 0.65
     assert purity(a.global_ids[m], gt[m]) > 0.90
     # same-view rule: within a view, one global id comes from one local segment
-    for v in range(tiny.num_views):
+    for v in range(tiny_scene.num_views):
         for g in np.unique(a.global_ids[v]):
             if g:
-                assert len(np.unique(tiny.seg_masks[v][a.global_ids[v] == g])) == 1
+                assert len(np.unique(tiny_scene.seg_masks[v][a.global_ids[v] == g])) == 1
     # deterministic, also for Louvain with its fixed seed
-    b = associate_instances(tiny.seg_masks, tiny.seg_background, al, tiny.intrinsics, tiny.cam_to_world, {})
+    b = associate_instances(tiny_scene.seg_masks, tiny_scene.seg_background, al, tiny_scene.intrinsics, tiny_scene.cam_to_world, {})
     np.testing.assert_array_equal(a.global_ids, b.global_ids)
     for method in ("louvain", "components"):
-        c1 = associate_instances(tiny.seg_masks, tiny.seg_background, al, tiny.intrinsics, tiny.cam_to_world, {"assoc_cluster": method})
-        c2 = associate_instances(tiny.seg_masks, tiny.seg_background, al, tiny.intrinsics, tiny.cam_to_world, {"assoc_cluster": method})
+        c1 = associate_instances(tiny_scene.seg_masks, tiny_scene.seg_background, al, tiny_scene.intrinsics, tiny_scene.cam_to_world, {"assoc_cluster": method})
+        c2 = associate_instances(tiny_scene.seg_masks, tiny_scene.seg_background, al, tiny_scene.intrinsics, tiny_scene.cam_to_world, {"assoc_cluster": method})
         np.testing.assert_array_equal(c1.global_ids, c2.global_ids)
         assert adjusted_rand_index(c1.global_ids[fg], gt[fg]) > 0.9
 
@@ -167,8 +161,8 @@ def test_uncertainty_quality_on_tiny_scene(tiny_result):
     assert np.all(U[none] == 0)
 
 
-def test_determinism_same_seed_same_u(tiny, tiny_result):
-    again = run_uncertainty_stage(tiny, tiny.gt_depth, {}, rng_seed=0, quality=False)
+def test_determinism_same_seed_same_u(tiny_scene, tiny_result):
+    again = run_uncertainty_stage(tiny_scene, tiny_scene.gt_depth, {}, rng_seed=0, quality=False)
     np.testing.assert_array_equal(again.uncertainty, tiny_result.uncertainty)
     np.testing.assert_array_equal(again.instance_ids, tiny_result.instance_ids)
 
@@ -188,7 +182,7 @@ def test_instance_seen_in_one_view_only_gets_failed_value():
 
 
 def test_zero_volume_instance_all_points_identical():
-    assert ball_radius_norm(np.ones((50, 3)), dict(UNCERTAINTY_DEFAULTS)) == (0.0, pytest.approx(0.01))
+    assert ball_radius_norm(np.ones((50, 3)), load_stage_config({"scene_radius": 1.0})) == (0.0, pytest.approx(0.01))
     # end to end: 3 views, one pixel each, all back-projecting to the same world point
     n = 3
     c2w = np.stack([np.eye(4) for _ in range(n)])
@@ -216,48 +210,55 @@ def test_all_densities_zero_is_a_failure_not_a_division():
     np.testing.assert_allclose(c[0], np.clip(np.array([0, 4, 8]) / (0.8 * 8 + 1e-6), 0, 1))
 
 
-def test_nan_in_prior_depth_raise_or_mask(tiny):
-    mono = tiny.mono_depth.copy()
+def test_nan_in_prior_depth_raise_or_mask(tiny_scene):
+    mono = tiny_scene.mono_depth.copy()
     mono[3, 10, 10:20] = np.nan
-    bad = dataclasses.replace(tiny, mono_depth=mono)
+    bad = dataclasses.replace(tiny_scene, mono_depth=mono)
     with pytest.raises(ValueError, match=r"mono_depth has NaN/inf in view\(s\) \[3\]"):
-        run_uncertainty_stage(bad, tiny.gt_depth, {"nonfinite_depth": "raise"}, quality=False)
+        run_uncertainty_stage(bad, tiny_scene.gt_depth, {"nonfinite_depth": "raise"}, quality=False)
     with pytest.warns(RuntimeWarning, match=r"view\(s\) \[3\]"):
-        r = run_uncertainty_stage(bad, tiny.gt_depth, {"nonfinite_depth": "mask"}, quality=False)
+        r = run_uncertainty_stage(bad, tiny_scene.gt_depth, {"nonfinite_depth": "mask"}, quality=False)
     assert np.all(np.isfinite(r.uncertainty)) and np.all(np.isfinite(r.aligned_depth))
     assert np.all(r.aligned_depth[3, 10, 10:20] == 0)
 
 
-def test_reference_depth_all_zero_for_a_view(tiny):
-    ref = tiny.gt_depth.copy()
+def test_reference_depth_all_zero_for_a_view(tiny_scene):
+    ref = tiny_scene.gt_depth.copy()
     ref[5] = 0.0
-    r = run_uncertainty_stage(tiny, ref, {}, quality=False)
+    r = run_uncertainty_stage(tiny_scene, ref, {}, quality=False)
     assert r.align_status[5] == 2 and r.diagnostics["n_align_fallback_views"] == 1
     assert np.all(np.isfinite(r.scale)) and np.all(np.isfinite(r.uncertainty))
     assert 0 <= r.uncertainty.min() and r.uncertainty.max() <= 1
 
 
 # ----------------------------------------------------------------- config and outputs
-def test_config_yaml_matches_code_defaults_and_rejects_unknown_keys():
-    y = load_stage_defaults()
-    assert set(y) == set(ALIGN_KEYS) | set(ASSOC_DEFAULTS) | set(UNCERTAINTY_DEFAULTS)
-    for k, v in {**ASSOC_DEFAULTS, **UNCERTAINTY_DEFAULTS}.items():
-        if k != "scene_radius":  # YAML null = from the scene's scale_mat; code default 1 (normalised input)
-            assert y[k] == v, k
-    with pytest.raises(ValueError, match="unknown uncertainty-stage parameter"):
-        resolve_stage_config({"dbscan_epsilon": 0.1})
+def test_stage_config_values_live_in_the_yaml_only_and_bad_keys_are_errors():
+    y = stage_defaults()
+    assert set(y) == {f.name for f in dataclasses.fields(UncertaintyStageConfig)}  # every key typed, every typed key valued
+    assert all(f.default is dataclasses.MISSING for f in dataclasses.fields(UncertaintyStageConfig))  # no second copy
+    cfg = load_stage_config()
+    assert cfg.scene_radius is None and cfg.radius_clamp == (0.005, 0.07) and cfg.assoc_cluster == "greedy"
+    with pytest.raises(ValueError, match="unknown config key 'dbscan_epsilon'"):
+        load_stage_config({"dbscan_epsilon": 0.1})
+    with pytest.raises(ValueError, match="radius_clamp"):
+        load_stage_config({"radius_clamp": [0.07, 0.005]})
+    with pytest.raises(ValueError, match="'assoc_cluster' must be one of"):
+        load_stage_config({"assoc_cluster": "kmeans"})
+    with pytest.raises(ValueError, match="needs scene_radius"):  # direct calls say what the stage would fill in
+        depth, ids, K, c2w = plane_views(2)
+        estimate_uncertainty(depth, ids, {}, K, c2w, {}, 0)
     stage, rest = split_stage_config({"align_mode": "scale_shift", "lr": 1e-3})
     assert stage == {"align_mode": "scale_shift"} and rest == {"lr": 1e-3}
 
 
-def test_scene_radius_and_save_maps(tiny, tiny_result, tmp_path):
-    assert scene_radius_of(tiny.scale_mat) == pytest.approx(tiny.scale_mat[0, 0])
+def test_scene_radius_and_save_maps(tiny_scene, tiny_result, tmp_path):
+    assert scene_radius_of(tiny_scene.scale_mat) == pytest.approx(tiny_scene.scale_mat[0, 0])
     paths = save_uncertainty_maps(tiny_result, tmp_path / "u")
-    assert len(paths) == tiny.num_views + 1
+    assert len(paths) == tiny_scene.num_views + 1
     from PIL import Image
 
     img = np.asarray(Image.open(paths[0]))
-    assert img.dtype == np.uint8 and img.shape == (tiny.height, tiny.width)
+    assert img.dtype == np.uint8 and img.shape == (tiny_scene.height, tiny_scene.width)
     np.testing.assert_array_equal(img, np.round(tiny_result.uncertainty[0] * 255).astype(np.uint8))
     assert not list((tmp_path / "u").glob(".*tmp"))
 

@@ -19,14 +19,7 @@ from methods.monosdf.grid import (
 )
 from methods.monosdf.losses import normal_loss, smoothness_loss, solve_scale_shift, ssi_depth_loss
 from methods.monosdf.render import composite_weights, sample_pdf
-from methods.registry import method_config
-
-
-@pytest.fixture(scope="module")
-def tiny_scene():
-    from bench.data.datasets import load_dataset
-
-    return load_dataset("scannet_like_tiny", "tiny")
+from methods.registry import method_config, typed_method_config
 
 
 def _spec():
@@ -255,7 +248,7 @@ def test_sample_pdf_with_all_zero_weights_is_uniform_and_sorted():
 def _trainer(scene, **over):
     from methods.monosdf.trainer import MonoSDFTrainer
 
-    cfg = method_config("monosdf", "tiny", {"rays_per_batch": 64, **over})
+    cfg = typed_method_config("monosdf", "tiny", {"rays_per_batch": 64, **over})
     return MonoSDFTrainer(scene, cfg, seed=0)
 
 
@@ -288,8 +281,8 @@ def test_pruned_rendering_matches_the_full_rendering(tiny_scene):
     pixels = torch.arange(0, 400, 5)
     r = tr.rays
     t, coarse_sdf = hierarchical_samples(tr.sdf, tr.density, r.origins[0].expand(len(pixels), 3), r.dirs[0, pixels], r.far[0, pixels],
-                                         tr.cfg["near"], tr.cfg["n_coarse"], tr.cfg["n_fine"], None, False, with_coarse_sdf=True)
-    assert int(coarse_sdf.isnan().sum()) == len(pixels) * tr.cfg["n_fine"]
+                                         tr.cfg.near, tr.cfg.n_coarse, tr.cfg.n_fine, None, False, with_coarse_sdf=True)
+    assert int(coarse_sdf.isnan().sum()) == len(pixels) * tr.cfg.n_fine
     results = []
     for prune in (0.0, 1e-4):
         for p in list(tr.sdf.parameters()) + list(tr.color.parameters()):
@@ -403,7 +396,7 @@ def test_diagnostics_report_depth_error_and_mesh_agreement(tiny_scene):
     d = tr.diagnostics(tr.extract_mesh(32))
     assert {"beta", "loss_color", "loss_eikonal", "depth_err_median", "mesh_ahead_frac", "sampler_gap_median",
             "samples_weighted", "edge_px_frac", "depth_err_interior_median", "depth_fit_scale_iqr"} <= set(d)
-    assert 0 < d["samples_weighted"] <= tr.cfg["n_coarse"] + tr.cfg["n_fine"]
+    assert 0 < d["samples_weighted"] <= tr.cfg.n_coarse + tr.cfg.n_fine
     assert all(np.isfinite(v) for v in d.values())
     assert 0.0 <= d["mesh_ahead_frac"] <= 1.0 and d["depth_err_median"] >= 0.0
     assert "loss_color" not in tr.diagnostics()  # averages reset at each call
@@ -456,8 +449,8 @@ def test_depth_warmup_ramps_the_depth_weight_only(tiny_scene):
     # at step 0 the total loss has no depth part
     tr0 = _trainer(tiny_scene, depth_warmup=0.5, iterations=8)
     logs = tr0.step(0)
-    rest = sum(tr0.cfg[f"{k}_weight"] * logs[k] for k in ("color", "eikonal", "smooth"))
-    rest += tr0.cfg["normal_weight"] * (logs["normal_l1"] + logs["normal_cos"])
+    rest = sum(getattr(tr0.cfg, f"{k}_weight") * logs[k] for k in ("color", "eikonal", "smooth"))
+    rest += tr0.cfg.normal_weight * (logs["normal_l1"] + logs["normal_cos"])
     assert logs["depth"] > 0 and abs(logs["loss"] - rest) < 1e-5 * max(1.0, abs(rest))
 
 
@@ -470,6 +463,7 @@ def test_lr_warmup_ramps_every_group_from_one_percent(tiny_scene):
     np.testing.assert_allclose(np.array(seen), np.array([[r] * len(tr.base_lrs) for r in (0.01, 0.25, 0.5, 0.75, 1.0)]))
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not fast_available(), reason="no C++ compiler")
 def test_stale_torch_build_lock_does_not_hang_the_next_run(tmp_path):
     """A build killed mid-way leaves torch's ``lock`` file; the next process must load the kernel, not

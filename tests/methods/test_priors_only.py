@@ -12,13 +12,6 @@ from bench.data.errors import BenchInputError
 from methods.oracle_tsdf import fusion_depth
 
 
-@pytest.fixture(scope="module")
-def tiny_scene():
-    from bench.data.datasets import load_dataset
-
-    return load_dataset("scannet_like_tiny", "tiny")
-
-
 def test_an_affine_prior_aligns_back_to_gt_exactly(tiny_scene):
     views = tiny_scene.view_indices("train")[:4]
     gt = tiny_scene.gt_depth
@@ -48,6 +41,7 @@ def test_constant_prior_view_is_skipped_and_bad_source_is_an_error(tiny_scene):
         fusion_depth(tiny_scene, views, "mono")
 
 
+@pytest.mark.slow
 def test_priors_only_row_is_below_the_oracle(tiny_scene):
     from bench.evaluate import evaluate_snapshot
     from methods.oracle_tsdf import OracleTSDF

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 import trimesh
@@ -68,11 +70,13 @@ def test_dilation_grows_masks_and_empty_masks_cull_all_visible(ring_cameras):
     assert len(culled.faces) == 0
 
 
-def test_dtu_protocol_with_monosdf_culling_drops_a_floater(monkeypatch):
+@pytest.mark.slow
+def test_dtu_protocol_with_monosdf_culling_drops_a_floater(monkeypatch, tmp_path):
     """End to end through bench.evaluate: the GT mesh plus a floater outside every mask. With
     ``dtu.cull: monosdf`` the floater is culled before the Chamfer step; both CDs are finite."""
     import bench.evaluate as ev
     from bench.data.datasets import load_dataset
+    from bench.data.errors import BenchInputError
     from methods.base import Snapshot
 
     scene = load_dataset("dtu_like_0", "tiny")
@@ -85,10 +89,12 @@ def test_dtu_protocol_with_monosdf_culling_drops_a_floater(monkeypatch):
     real = ev.protocol_params
 
     def with_cull(cull):
-        monkeypatch.setattr(ev, "protocol_params", lambda protocol, scale: {**real(protocol, scale), "cull": cull})
+        monkeypatch.setattr(ev, "protocol_params", lambda protocol, scale: dataclasses.replace(real(protocol, scale), cull=cull))
         return ev.evaluate_snapshot(snap, scene, "dtu", "tiny")["cd"]
 
     plain, culled = with_cull("none"), with_cull("monosdf")
     assert np.isfinite(plain) and np.isfinite(culled) and culled < plain  # measured 0.0021 -> 0.0013 m
-    with pytest.raises(Exception, match="dtu.cull"):
-        with_cull("sparseneus")
+    bad = tmp_path / "protocols.yaml"  # a bad value in the protocols file: an error naming the file and the key
+    bad.write_text(ev.PROTOCOLS_FILE.read_text().replace("cull: none}", "cull: sparseneus}"))
+    with pytest.raises(BenchInputError, match=r"protocols.yaml \(dtu, scale 'tiny'\).*'cull' must be one of"):
+        real("dtu", "tiny", path=bad)

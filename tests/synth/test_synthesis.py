@@ -239,15 +239,18 @@ def test_per_scale_values_need_the_requested_scale():
         ({"objects": [{"type": "chair", "count": -2}]}, r"objects\.0\.count\]: must be >= 1, got -2"),
         ({"objects": [{"type": "chair", "size": 0}]}, r"objects\.chair\.size\]: must be > 0, got 0"),
         ({"objects": [{"type": "chair", "size": "big"}]}, r"objects\.chair\.size\]: must be a number"),
-        ({"cameras": {"views": "many"}}, r"cameras\.views\]: must be an integer, got 'many'"),
-        ({"cameras": {"hfov": -30}}, r"cameras\.hfov\]: must be > 0, got -30"),
-        ({"cameras": {"jitter": "lots"}}, r"cameras\.jitter\]: must be a number"),
-        ({"cameras": {"height": [1.6, 1.2]}}, r"cameras\.height\]: need low <= high"),
+        ({"cameras": {"views": "many"}}, r"\[cameras\]: config key 'views' must be an integer in \[2, inf\) or null \(got 'many'\)"),
+        ({"cameras": {"hfov": -30}}, r"\[cameras\]: config key 'hfov' must be a number in \(0, 170\] or null \(got -30\)"),
+        ({"cameras": {"jitter": "lots"}}, r"\[cameras\]: config key 'jitter' must be a number"),
+        ({"cameras": {"height": [1.6, 1.2]}}, r"\[cameras\]: RoomCameras: height must be \[low, high\] with low <= high"),
+        ({"cameras": {"height": [1.2, 2.9]}}, r"cameras\.height\]: need low <= high < the room height"),
+        ({"cameras": {"veiws": 20}}, r"\[cameras\]: unknown config key 'veiws' of RoomCameras"),  # a typo was silently ignored
+        ({"room": {"size": [4.0, 3.0]}}, r"\[room\]: config key 'size' must be a list"),
     ],
 )
 def test_bad_recipe_values_name_the_key(tmp_path, patch, match):
-    """Values the recipe schema cannot check by type alone are range-checked where they are read, with
-    the offending key in the one-line message (they were tracebacks or silently accepted)."""
+    """Bad values and unknown keys of a recipe's sections are one-line errors naming the recipe file and
+    the key (typed sections, bench.data.config; they were tracebacks or silently accepted)."""
     path = _write_recipe(tmp_path, {"name": "v", "kind": "room", "format": "scannet", "preset": "scannet",
                                     "objects": [{"type": "table"}], **patch})
     with pytest.raises(BenchInputError, match=match) as err:

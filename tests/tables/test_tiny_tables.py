@@ -6,10 +6,14 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from bench.cli import main
-from bench.pipeline import SHIPPED_TABLES as TABLES_DIR
+from bench.pipeline import SHIPPED_TABLES as TABLES_DIR, plan_jobs
 from bench.runner import resolve_jobs
-from bench.tables import list_tables, load_table_spec, plan_jobs
+from bench.table_spec import list_tables, load_table_spec
+
+pytestmark = pytest.mark.slow  # end to end (pyproject's `slow` marker; skipped by the fast loop -m 'not slow')
 
 # Method outcomes, not harness errors: 3-view training at 100 iterations can lose the whole surface
 # (the DTU no-prior and Full rows at the tiny scale: an empty mesh, or a few stray triangles nowhere near

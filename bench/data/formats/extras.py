@@ -37,7 +37,7 @@ import json
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, cast
 
 import numpy as np
 
@@ -215,7 +215,7 @@ def check_gt_mesh(path: Path) -> None:
     import trimesh
 
     try:
-        mesh = trimesh.load(path, force="mesh", process=False)
+        mesh = cast(trimesh.Trimesh, trimesh.load(path, force="mesh", process=False))
     except Exception as exc:  # trimesh raises ValueError / KeyError / struct errors on broken files
         raise BenchInputError(path, f"GT mesh cannot be read ({type(exc).__name__}: {exc})") from None
     v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)

@@ -111,8 +111,8 @@ def default_scale_mat(K: np.ndarray, c2w: np.ndarray, bounds: np.ndarray, hw: tu
         dirs = np.linalg.inv(K[i]) @ corners  # (3, 4), z = 1
         for d in bounds[i]:
             pts.append((c2w[i, :3, :3] @ (dirs * d)).T + c2w[i, :3, 3])
-    pts = np.concatenate(pts)
-    lo, hi = pts.min(0), pts.max(0)
+    every = np.concatenate(pts)
+    lo, hi = every.min(0), every.max(0)
     centre, radius = (lo + hi) / 2, max(float(np.linalg.norm(hi - lo)) / 2, 1e-6)
     S = np.diag([radius, radius, radius, 1.0])
     S[:3, 3] = centre

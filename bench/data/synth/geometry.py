@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 import trimesh
@@ -60,7 +61,7 @@ def _rod(p0: np.ndarray, p1: np.ndarray, radius: float, sections: int = 8) -> tr
 
 
 def _merge(parts: list[trimesh.Trimesh]) -> trimesh.Trimesh:
-    return trimesh.util.concatenate(parts)
+    return cast(trimesh.Trimesh, trimesh.util.concatenate(parts))
 
 
 def _place(mesh: trimesh.Trimesh, x: float, y: float, yaw: float) -> trimesh.Trimesh:

@@ -12,7 +12,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import trimesh
@@ -29,7 +29,16 @@ from bench.data.synth.geometry import (
     load_user_mesh,
     place_on_floor,
 )
-from bench.data.synth.recipe import Recipe, check_number, resolve_mesh_path
+from bench.data.synth.recipe import (
+    ForwardCameras,
+    ForwardSection,
+    ObjectCameras,
+    Recipe,
+    RoomCameras,
+    RoomSection,
+    check_number,
+    resolve_mesh_path,
+)
 from bench.data.synth.shading import TEXTURES
 
 ROOM_PRESETS: dict[str, dict[str, Any]] = {
@@ -86,16 +95,6 @@ def _sphere_scale_mat(centre: np.ndarray, radius: float) -> np.ndarray:
     return m
 
 
-def _number_list(recipe: Recipe, keys: tuple[str, ...], scale: str, default: list[float], length: int | None = None,
-                 **bounds: Any) -> tuple[float, ...]:
-    """A list of checked numbers at ``keys`` (``length`` of them if given); bounds as in check_number."""
-    value = recipe.get(*keys, scale=scale, default=default)
-    where = recipe.where(*keys)
-    if not isinstance(value, (list, tuple)) or (length is not None and len(value) != length) or not value:
-        raise BenchInputError(where, f"must be a list of {length or 'one or more'} numbers, got {value!r}")
-    return tuple(check_number(v, where, **bounds) for v in value)
-
-
 def _image_size(recipe: Recipe, scale: str, default: Any) -> tuple[int, int]:
     wh = recipe.get("image", scale=scale, default=None)
     if wh is None:
@@ -124,7 +123,7 @@ def _make_object(recipe: Recipe, spec: dict[str, Any], name: str, rng: np.random
 def _expand(specs: list[dict[str, Any]], where: str) -> list[dict[str, Any]]:
     out = []
     for i, s in enumerate(specs):
-        out.extend([s] * check_number(s.get("count", 1), f"{where} [objects.{i}.count]", integer=True, lo=1))
+        out.extend([s] * int(check_number(s.get("count", 1), f"{where} [objects.{i}.count]", integer=True, lo=1)))
     return out
 
 
@@ -139,22 +138,19 @@ def build_room(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layout:
     if preset_name not in ROOM_PRESETS:
         raise BenchInputError(recipe.where("preset"), f"room preset must be one of {sorted(ROOM_PRESETS)}, got {preset_name!r}")
     preset = ROOM_PRESETS[preset_name]
-    size = recipe.get("room", "size", scale=scale, default=None)
-    if size is None:
-        size = [s * rng.uniform(0.9, 1.1) for s in preset["size"]]
-    if not (isinstance(size, list) and len(size) == 3 and all(isinstance(v, (int, float)) and v > 1.0 for v in size)):
-        raise BenchInputError(recipe.where("room", "size"), f"room size must be 3 numbers > 1 m, got {size!r}")
-    size = tuple(float(v) for v in size)
-    n_views = recipe.number("cameras", "views", scale=scale, default=preset["views"].get(scale), integer=True, lo=2)
+    room = recipe.section(RoomSection, "room", scale)
+    camera = recipe.section(RoomCameras, "cameras", scale)
+    size: tuple[float, float, float] = room.size if room.size is not None else \
+        cast(tuple[float, float, float], tuple(float(s * rng.uniform(0.9, 1.1)) for s in preset["size"]))
+    n_views = camera.views if camera.views is not None else int(preset["views"][scale])
     width, height = _image_size(recipe, scale, preset["image"])
-    jitter = recipe.number("cameras", "jitter", scale=scale, default=preset["jitter"], lo=0.0)
-    hfov = recipe.number("cameras", "hfov", scale=scale, default=preset["hfov"], lo=0.0, hi=170.0, lo_open=True)
-    height_range = _number_list(recipe, ("cameras", "height"), scale, [1.2, 1.6], 2, lo=0.0)
-    if not height_range[0] <= height_range[1] < size[2]:
+    jitter = camera.jitter if camera.jitter is not None else float(preset["jitter"])
+    hfov = camera.hfov if camera.hfov is not None else float(preset["hfov"])
+    height_range = camera.height
+    if not height_range[1] < size[2]:
         raise BenchInputError(recipe.where("cameras", "height"), f"need low <= high < the room height {size[2]:g} m, got {list(height_range)}")
 
-    loop = recipe.number("cameras", "loop_radius", scale=scale, default=0.12, lo=0.0, hi=0.45)
-    poses = cams.room_path(size, n_views, rng, height_range=height_range, jitter=jitter, radius_frac=loop)
+    poses = cams.room_path(size, n_views, rng, height_range=height_range, jitter=jitter, radius_frac=camera.loop_radius)
     clear = [np.array([p[:2, 3] - 0.25, p[:2, 3] + 0.25]) for p in poses]
 
     objects = build_room_shell(size, rng)
@@ -195,13 +191,12 @@ def build_object(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layout
     extent = float(np.max(mesh.extents))
     centre = mesh.bounds.mean(axis=0)
     width, height = _image_size(recipe, scale, {"tiny": [64, 48], "small": [128, 96], "medium": [200, 150], "large": [400, 300]})
-    distance = recipe.number("cameras", "distance", scale=scale, default=2.6 * extent, lo=0.0, lo_open=True)
-    hfov = recipe.number("cameras", "hfov", scale=scale, default=40.0, lo=0.0, hi=170.0, lo_open=True)
-    train_az = np.asarray(_number_list(recipe, ("cameras", "train_azimuths"), scale, [-40.0, 0.0, 40.0]), dtype=float)
-    train_el = np.asarray(_number_list(recipe, ("cameras", "train_elevations"), scale, [30.0, 25.0, 35.0], len(train_az),
-                                       lo=-89.0, hi=89.0), dtype=float)
-    n_eval = recipe.number("cameras", "eval_views", scale=scale, default={"tiny": 8, "small": 24, "medium": 48, "large": 64}[scale],
-                           integer=True, lo=1)
+    camera = recipe.section(ObjectCameras, "cameras", scale)
+    distance = camera.distance if camera.distance is not None else 2.6 * extent
+    hfov = camera.hfov
+    train_az = np.asarray(camera.train_azimuths, dtype=float)
+    train_el = np.asarray(camera.train_elevations, dtype=float)
+    n_eval = camera.eval_views if camera.eval_views is not None else {"tiny": 8, "small": 24, "medium": 48, "large": 64}[scale]
     eval_az = np.linspace(-90.0, 90.0, n_eval) + rng.uniform(-3, 3, n_eval)
     eval_el = rng.uniform(15.0, 60.0, n_eval)
     poses = np.concatenate([cams.sphere_views(centre, distance, train_az, train_el), cams.sphere_views(centre, distance, eval_az, eval_el)])
@@ -226,15 +221,17 @@ def build_forward(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layou
     :func:`bench.data.synth.cameras.handheld_forward`), ``hfov``, ``look_distance``."""
     specs = _expand(recipe.raw.get("objects") or [{"type": "plant"}, {"type": "lamp"}, {"type": "chair"}, {"type": "table"}, {"type": "cabinet"}],
                     recipe.where())
-    far = float(recipe.number("forward", "back_wall", scale=scale, default=6.0, lo=0.5, hi=100.0))
-    d_lo, d_hi = _number_list(recipe, ("forward", "depth_range"), scale, [1.6, 4.5], 2, lo=0.1, hi=100.0)
+    forward = recipe.section(ForwardSection, "forward", scale)
+    camera = recipe.section(ForwardCameras, "cameras", scale)
+    far = forward.back_wall
+    d_lo, d_hi = forward.depth_range
     if not d_lo <= d_hi < far:
         raise BenchInputError(recipe.where("forward", "depth_range"), f"need near <= far < back_wall {far:g} m, got {[d_lo, d_hi]}")
-    spread = float(recipe.number("forward", "lateral_spread", scale=scale, default=0.22, lo=0.0, hi=10.0))
-    wall_tex = str(recipe.get("forward", "wall_texture", scale=scale, default="none"))
+    spread = forward.lateral_spread
+    wall_tex = forward.wall_texture
     if wall_tex not in TEXTURES:
         raise BenchInputError(recipe.where("forward", "wall_texture"), f"must be one of {TEXTURES}, got {wall_tex!r}")
-    wall_scale = float(recipe.number("forward", "wall_texture_scale", scale=scale, default=0.5, lo=0.0, lo_open=True))
+    wall_scale = forward.wall_texture_scale
     objects = [
         SceneObject("ground", "floor", _box((8.0, far + 1, 0.05), (0.0, far / 2, -0.025)), True, False, _jitter_colour(rng, (0.5, 0.45, 0.4)), "tiles", 0.4),
         SceneObject("back_wall", "wall", _box((8.0, 0.05, 4.0), (0.0, far, 2.0)), True, False, _jitter_colour(rng, (0.75, 0.75, 0.7)), wall_tex,
@@ -256,26 +253,18 @@ def build_forward(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layou
         counts[category] = counts.get(category, 0) + 1
         objects.append(_scene_object(name, category, mesh, thin, rng))
     width, height = _image_size(recipe, scale, {"tiny": [128, 96], "small": [256, 192], "medium": [504, 378], "large": [1008, 756]})
-    hfov = recipe.number("cameras", "hfov", scale=scale, default=60.0, lo=0.0, hi=170.0, lo_open=True)
-    look = float(recipe.number("cameras", "look_distance", scale=scale, default=3.0, lo=0.0, lo_open=True))
-    path = str(recipe.get("cameras", "path", scale=scale, default="grid"))
-    cam_height = float(recipe.number("cameras", "height", scale=scale, default=1.0, lo=0.0))
-    rig_centre = np.array([0.0, 0.0, cam_height])
-    if path == "grid":
-        grid = tuple(int(v) for v in _number_list(recipe, ("cameras", "grid"), scale, [5, 4], 2, lo=1, integer=True))
-        spacing = _number_list(recipe, ("cameras", "spacing"), scale, [0.08, 0.06], 2, lo=0.0, lo_open=True)
+    hfov = camera.hfov
+    look = camera.look_distance
+    rig_centre = np.array([0.0, 0.0, camera.height])
+    if camera.path == "grid":
+        grid, spacing = camera.grid, camera.spacing
         poses = cams.forward_grid(rig_centre, grid, spacing, look_distance=look, rng=rng)
         info: dict[str, Any] = {"camera_path": "grid", "grid": list(grid), "spacing_m": list(spacing)}
-    elif path == "handheld":
-        n_views = int(recipe.number("cameras", "views", scale=scale, default=24, integer=True, lo=4, hi=1000))
-        extent = _number_list(recipe, ("cameras", "extent"), scale, [0.6, 0.3], 2, lo=0.0)
-        rows = int(recipe.number("cameras", "rows", scale=scale, default=3, integer=True, lo=1, hi=n_views))
-        jitter = float(recipe.number("cameras", "jitter", scale=scale, default=0.1, lo=0.0, hi=1.0))
-        look_jitter = float(recipe.number("cameras", "look_jitter", scale=scale, default=2.0, lo=0.0, hi=30.0))
-        poses = cams.handheld_forward(rig_centre, n_views, extent, look, rng, rows=rows, position_jitter=jitter, look_jitter_deg=look_jitter)
+    else:  # handheld
+        n_views, extent, rows = camera.views, camera.extent, camera.rows
+        poses = cams.handheld_forward(rig_centre, n_views, extent, look, rng, rows=rows, position_jitter=camera.jitter,
+                                      look_jitter_deg=camera.look_jitter)
         info = {"camera_path": "handheld", "views": n_views, "extent_m": list(extent), "rows": rows}
-    else:
-        raise BenchInputError(recipe.where("cameras", "path"), f"must be 'grid' or 'handheld', got {path!r}")
     n = len(poses)
     K = np.repeat(cams.intrinsics(width, height, hfov)[None], n, axis=0)
     # LLFF protocol (FSGS): images sorted by name, test = every 8th, 3 train views evenly spaced over the rest.

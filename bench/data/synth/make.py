@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import trimesh
@@ -89,7 +89,7 @@ def make_scene(recipe: Recipe, scale: str = "small", seed: int | None = None) ->
         "generator": f"bench {__version__}",
         "convention": "cam_to_world OpenCV (x right, y down, z forward), metres, z-depth",
     }
-    gt_mesh = trimesh.util.concatenate([o.mesh for o in layout.objects])
+    gt_mesh = cast(trimesh.Trimesh, trimesh.util.concatenate([o.mesh for o in layout.objects]))
     scene.validate()
     return scene, gt_mesh
 

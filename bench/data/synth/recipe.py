@@ -28,6 +28,11 @@ of 2-5 m). Object (DTU-like) cameras: ``distance``, ``hfov``, ``train_azimuths``
 ``rows``, ``jitter``, ``look_jitter``), ``hfov``, ``look_distance``, ``height``; the LLFF-like layout
 itself under ``forward:`` (``depth_range``, ``back_wall``, ``lateral_spread``, ``wall_texture``,
 ``wall_texture_scale``; :func:`bench.data.synth.layouts.build_forward`).
+
+The sections ``room:``, ``cameras:`` and ``forward:`` are typed (:class:`RoomSection`, :class:`RoomCameras`,
+:class:`ObjectCameras`, :class:`ForwardCameras`, :class:`ForwardSection`; read with
+:meth:`Recipe.section`): an unknown key, a wrong type or a value out of range is one error naming the
+recipe file and the key (``bench.data.config``, the harness's one config mechanism).
 """
 
 from __future__ import annotations
@@ -35,10 +40,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal, TypeVar
 
 import yaml
 
+from bench.data.config import Range, load_config
 from bench.data.errors import BenchInputError
 from bench.data.scene import DATASET_FORMATS, SCENE_KINDS
 
@@ -47,6 +53,85 @@ SCALES = ("tiny", "small", "medium", "large")
 TOP_LEVEL_KEYS = {"name", "kind", "format", "seed", "preset", "description", "room", "objects", "object", "cameras", "image", "effects", "llff", "forward"}
 OBJECT_TYPES = ("table", "chair", "lamp", "plant", "cabinet", "sofa", "shelf", "fern", "mesh")
 KIND_FORMATS = {"room": ("scannet", "replica"), "object": ("dtu",), "forward": ("llff",)}
+
+
+T = TypeVar("T")
+Metres = Annotated[float, Range(lo=0)]
+Degrees = Annotated[float, Range(lo=0, hi=170, lo_open=True)]
+
+
+# ---- typed sections of a recipe (bench.data.config: unknown keys, wrong types, out-of-range values are
+# ---- errors naming the recipe and the key). None = a default that depends on the preset, scale or object.
+@dataclass(frozen=True)
+class RoomSection:
+    """``room:`` of a room recipe: ``size`` [x, y, z] metres (None: the preset's, +-10 % from the seed)."""
+
+    size: tuple[Annotated[float, Range(lo=1, lo_open=True)], Annotated[float, Range(lo=1, lo_open=True)],
+                Annotated[float, Range(lo=1, lo_open=True)]] | None = None
+
+
+@dataclass(frozen=True)
+class RoomCameras:
+    """``cameras:`` of a room recipe (a hand-held loop inside the room)."""
+
+    views: Annotated[int, Range(lo=2)] | None = None         # None: the preset's count at the scale
+    jitter: Metres | None = None                              # shakiness, m (None: the preset's)
+    hfov: Degrees | None = None                               # None: the preset's
+    height: tuple[Metres, Metres] = (1.2, 1.6)                # [low, high] camera height, m
+    loop_radius: Annotated[float, Range(lo=0, hi=0.45)] = 0.12  # the loop's radii / room size
+
+    def check(self) -> str | None:
+        return None if self.height[0] <= self.height[1] else f"height must be [low, high] with low <= high, got {list(self.height)}"
+
+
+@dataclass(frozen=True)
+class ObjectCameras:
+    """``cameras:`` of an object (DTU-like) recipe: sparse training views + dense evaluation-only views."""
+
+    distance: Annotated[float, Range(lo=0, lo_open=True)] | None = None  # m (None: 2.6 x the object's extent)
+    hfov: Degrees = 40.0
+    train_azimuths: tuple[float, ...] = (-40.0, 0.0, 40.0)    # degrees
+    train_elevations: tuple[Annotated[float, Range(lo=-89, hi=89)], ...] = (30.0, 25.0, 35.0)
+    eval_views: Annotated[int, Range(lo=1)] | None = None     # None: 8 / 24 / 48 / 64 by scale
+
+    def check(self) -> str | None:
+        if not self.train_azimuths:
+            return "train_azimuths must list one or more angles"
+        if len(self.train_elevations) != len(self.train_azimuths):
+            return f"train_elevations must have one angle per azimuth ({len(self.train_azimuths)}), got {list(self.train_elevations)}"
+        return None
+
+
+@dataclass(frozen=True)
+class ForwardCameras:
+    """``cameras:`` of a forward-facing (LLFF-like) recipe: ``path: grid`` (``grid``, ``spacing``) or
+    ``path: handheld`` (``views``, ``extent``, ``rows``, ``jitter``, ``look_jitter``)."""
+
+    path: Literal["grid", "handheld"] = "grid"
+    hfov: Degrees = 60.0
+    look_distance: Annotated[float, Range(lo=0, lo_open=True)] = 3.0
+    height: Metres = 1.0
+    grid: tuple[Annotated[int, Range(lo=1)], Annotated[int, Range(lo=1)]] = (5, 4)
+    spacing: tuple[Annotated[float, Range(lo=0, lo_open=True)], Annotated[float, Range(lo=0, lo_open=True)]] = (0.08, 0.06)
+    views: Annotated[int, Range(lo=4, hi=1000)] = 24
+    extent: tuple[Metres, Metres] = (0.6, 0.3)
+    rows: Annotated[int, Range(lo=1)] = 3
+    jitter: Annotated[float, Range(lo=0, hi=1)] = 0.1
+    look_jitter: Annotated[float, Range(lo=0, hi=30)] = 2.0     # degrees
+
+    def check(self) -> str | None:
+        return None if self.rows <= self.views else f"rows ({self.rows}) must be <= views ({self.views})"
+
+
+@dataclass(frozen=True)
+class ForwardSection:
+    """``forward:`` of a forward-facing recipe (:func:`bench.data.synth.layouts.build_forward`)."""
+
+    depth_range: tuple[Annotated[float, Range(lo=0.1, hi=100)], Annotated[float, Range(lo=0.1, hi=100)]] = (1.6, 4.5)
+    back_wall: Annotated[float, Range(lo=0.5, hi=100)] = 6.0
+    lateral_spread: Annotated[float, Range(lo=0, hi=10)] = 0.22
+    wall_texture: str = "none"
+    wall_texture_scale: Annotated[float, Range(lo=0, lo_open=True)] = 0.5
 
 
 @dataclass
@@ -70,11 +155,14 @@ class Recipe:
             node = node[k]
         return resolve_scale(node, scale, self.where(*keys))
 
-    def number(self, *keys: str, default: Any = None, scale: str = "small", integer: bool = False,
-               lo: float | None = None, hi: float | None = None, lo_open: bool = False) -> float | int:
-        """:meth:`get` a number, checked: an int (``integer``) or a float in [lo, hi] ((lo, hi] with
-        ``lo_open``); anything else is a BenchInputError naming the recipe and the key path."""
-        return check_number(self.get(*keys, default=default, scale=scale), self.where(*keys), integer, lo, hi, lo_open)
+    def section(self, cls: type[T], key: str, scale: str) -> T:
+        """The mapping at ``key`` as the typed section ``cls`` (per-scale values resolved first)."""
+        raw = self.raw.get(key)
+        if raw is None:
+            raw = {}
+        if not isinstance(raw, dict):
+            raise BenchInputError(self.where(key), f"must be a mapping, got {raw!r}")
+        return load_config(cls, {k: resolve_scale(v, scale, self.where(key, k)) for k, v in raw.items()}, self.where(key))
 
     def where(self, *keys: str) -> str:
         base = str(self.path) if self.path else self.name

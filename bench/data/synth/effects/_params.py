@@ -4,15 +4,17 @@ Each effect declares its parameters as a frozen dataclass whose fields are made 
 which records the kind (``float``, ``int``, ``bool``, ``range``, ``choice``), the allowed interval,
 the unit and a one-line description. :func:`parse_params` turns a recipe dict into that dataclass or
 raises one :class:`~bench.data.errors.BenchInputError` naming the effect, the parameter and the problem.
+Values are checked by the harness's one config core (:func:`bench.data.config.check_value` on the
+annotation a spec stands for, :func:`annotation_of`); the spec adds units and docs for docs/effects.md.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Annotated, Any, Literal
 
+from bench.data.config import Range, check_value
 from bench.data.errors import BenchInputError
 
 KINDS = ("float", "int", "bool", "range", "choice")
@@ -58,15 +60,6 @@ class ParamSpec:
         hi = "inf" if self.hi is None else _fmt(self.hi)
         return f"{left}{lo}, {hi}{right}"
 
-    def in_bounds(self, x: float) -> bool:
-        if not math.isfinite(x):
-            return False
-        if self.lo is not None and (x <= self.lo if self.lo_open else x < self.lo):
-            return False
-        if self.hi is not None and (x >= self.hi if self.hi_open else x > self.hi):
-            return False
-        return True
-
 
 def _fmt(x: float) -> str:
     return str(int(x)) if float(x).is_integer() else repr(float(x))
@@ -98,40 +91,31 @@ def _is_number(x: Any) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool)
 
 
+def annotation_of(spec: ParamSpec) -> Any:
+    """The :mod:`bench.data.config` annotation a parameter's spec stands for (one checking core for
+    every config of the harness; the spec adds the unit and the one-line doc for docs/effects.md)."""
+    bounds = Range(spec.lo, spec.hi, spec.lo_open, spec.hi_open)
+    if spec.kind == "bool":
+        return bool
+    if spec.kind == "choice":
+        return Literal[tuple(spec.choices)]  # type: ignore[valid-type]
+    if spec.kind == "int":
+        return Annotated[int, bounds]
+    if spec.kind == "float":
+        return Annotated[float, bounds]
+    return tuple[Annotated[float, bounds], Annotated[float, bounds]]  # range
+
+
 def _check_value(effect: str, name: str, spec: ParamSpec, value: Any, where: str) -> Any:
     """Validate one value against its spec; return it normalised (float, int, bool, tuple, str)."""
-
-    def fail() -> BenchInputError:
-        return BenchInputError(
-            where, f"effect '{effect}': parameter '{name}' must be {spec.describe()} (got {value!r})"
-        )
-
-    if spec.kind == "bool":
-        if not isinstance(value, bool):
-            raise fail()
-        return value
-    if spec.kind == "choice":
-        if not isinstance(value, str) or value not in spec.choices:
-            raise fail()
-        return value
-    if spec.kind == "int":
-        if not isinstance(value, int) or isinstance(value, bool) or not spec.in_bounds(float(value)):
-            raise fail()
-        return int(value)
-    if spec.kind == "float":
-        if not _is_number(value) or not spec.in_bounds(float(value)):
-            raise fail()
-        return float(value)
-    # range: a pair [low, high]; a single number x means the degenerate range [x, x]
-    if _is_number(value):
-        pair = (float(value), float(value))
-    elif isinstance(value, (list, tuple)) and len(value) == 2 and all(_is_number(v) for v in value):
-        pair = (float(value[0]), float(value[1]))
-    else:
-        raise fail()
-    if not (spec.in_bounds(pair[0]) and spec.in_bounds(pair[1]) and pair[0] <= pair[1]):
-        raise fail()
-    return pair
+    pair = (value, value) if spec.kind == "range" and _is_number(value) else value  # x means the range [x, x]
+    try:
+        out = check_value(annotation_of(spec), pair)
+    except ValueError:
+        out = None
+    if out is None or (spec.kind == "range" and out[0] > out[1]):
+        raise BenchInputError(where, f"effect '{effect}': parameter '{name}' must be {spec.describe()} (got {value!r})")
+    return out
 
 
 def parse_params(effect: str, cls: type, raw: dict[str, Any], where: str) -> Any:

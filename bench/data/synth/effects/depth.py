@@ -8,7 +8,7 @@ result is stored as float32.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from scipy import ndimage
@@ -53,7 +53,7 @@ def mono_depth_affine(scene: Scene, p: DepthAffineParams, rng: np.random.Generat
     Parameters: scale (range, unitless, > 0), shift (range, metres or fraction of median depth),
     shift_mode ('absolute' | 'relative').
     """
-    depth = scene.mono_depth
+    depth = cast(np.ndarray, scene.mono_depth)  # rendered by the synthesiser before any effect runs
     scales, shifts, clamped = [], [], []
     for v in range(depth.shape[0]):
         d = depth[v].astype(np.float64)
@@ -165,7 +165,7 @@ def depth_bleeding(scene: Scene, p: DepthBleedingParams, rng: np.random.Generato
     Parameters: edge_width_px (px), edge_threshold (relative), edge_strength (0-1), thin_kernel_px
     (px), thin_pull (range of fractions in [0, 1]), thin_vanish_prob (probability).
     """
-    depth = scene.mono_depth
+    depth = cast(np.ndarray, scene.mono_depth)  # rendered by the synthesiser before any effect runs
     n_views = depth.shape[0]
     pulls: list[list[float]] = []
     thin_px: list[int] = []
@@ -258,7 +258,7 @@ def lowfreq_warp(scene: Scene, p: LowFreqWarpParams, rng: np.random.Generator) -
     Parameters: amplitude (fraction, <= 0.9 so priors stay positive), n_terms (count), max_freq
     (cycles per longer image side).
     """
-    depth = scene.mono_depth
+    depth = cast(np.ndarray, scene.mono_depth)  # rendered by the synthesiser before any effect runs
     n_views, h, w_px = depth.shape
     side = float(max(h, w_px))
     x, y = np.meshgrid((np.arange(w_px) + 0.5) / side, (np.arange(h) + 0.5) / side)
@@ -300,7 +300,7 @@ def depth_noise(scene: Scene, p: DepthNoiseParams, rng: np.random.Generator) -> 
 
     Parameters: sigma (relative std, <= 0.5), correlation_px (pixels).
     """
-    depth = scene.mono_depth
+    depth = cast(np.ndarray, scene.mono_depth)  # rendered by the synthesiser before any effect runs
     for v in range(depth.shape[0]):
         n = rng.standard_normal(depth.shape[1:])
         if p.correlation_px > 0:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 from scipy import ndimage
@@ -130,7 +131,7 @@ def normal_from_depth(scene: Scene, p: NormalFromDepthParams, rng: np.random.Gen
 
     Parameters: blend_gt (weight in [0, 1]), smooth_px (pixels), align_to_gt (bool).
     """
-    depth = scene.mono_depth
+    depth = cast(np.ndarray, scene.mono_depth)  # rendered by the synthesiser before any effect runs
     n_views, h, w = depth.shape
     if scene.mono_normal is None:
         scene.mono_normal = np.zeros((n_views, h, w, 3), dtype=np.float32)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -75,7 +75,7 @@ def segmentation_inconsistent(scene: Scene, p: SegmentationParams, rng: np.rando
     Parameters: permute_ids (bool), split_prob, merge_prob, miss_prob (probabilities), min_area_px
     (pixels).
     """
-    seg_all = scene.seg_masks
+    seg_all = cast(np.ndarray, scene.seg_masks)  # rendered by the synthesiser before any effect runs
     n_views, h, w = seg_all.shape
     new_bg: list[dict[int, bool]] = []
     counts: dict[str, list[int]] = {"missed": [], "merged": [], "split": [], "too_small": []}

@@ -1,9 +1,13 @@
 """Table specs: which rows (method variants), scenes, seeds and metric columns make up one of the
 paper's tables, the paper's published values, and the paper's claims to check.
 
-A spec is a YAML file in ``configs/tables/``; :func:`load_table_spec` parses it strictly (unknown keys,
-unknown directions, claims naming rows or metrics that do not exist, scales missing from a group all
-raise :class:`~bench.data.errors.BenchInputError` naming the file and the key). The schema::
+A spec is a YAML file in ``configs/tables/``; :func:`load_table_spec` parses it strictly: its records
+(the table, groups, columns, rows, the three claim kinds, convergence criteria) are typed dataclasses
+filled by :func:`bench.data.config.load_config` (unknown keys, missing keys, wrong types), then the
+references between them are checked (claims naming rows or metrics that do not exist, scales missing
+from a group); every problem raises :class:`~bench.data.errors.BenchInputError` naming the file and the
+key path. The jobs a spec
+expects are planned by :func:`bench.pipeline.plan_jobs`. The schema::
 
     name: ablation                      # must equal the file stem
     title: "Table 4: ..."
@@ -51,17 +55,16 @@ compares a row that has not converged is UNDECIDED (its comparison on the measur
 
 from __future__ import annotations
 
-import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, Mapping
+from typing import Annotated, Any, Literal, Mapping
 
 import yaml
 
 from bench.convergence import ConvergenceSpec
+from bench.data.config import Range, load_config
 from bench.data.errors import BenchInputError
-from bench.jobs import JobPlan
 from bench.data.scene import DATASET_FORMATS
 
 Direction = Literal["lower", "higher"]
@@ -226,18 +229,6 @@ class _Ctx:
     def fail(self, key: str, problem: str) -> BenchInputError:
         return BenchInputError(self.path, f"{key}: {problem}" if key else problem)
 
-    def mapping(self, obj: Any, key: str, required: set[str], optional: set[str]) -> dict[str, Any]:
-        if not isinstance(obj, dict):
-            raise self.fail(key, f"expected a mapping, got {type(obj).__name__}")
-        unknown = sorted(set(map(str, obj)) - required - optional)
-        if unknown:
-            allowed = ", ".join(sorted(required | optional))
-            raise self.fail(key, f"unknown key(s) {unknown} (allowed: {allowed})")
-        missing = sorted(required - set(obj))
-        if missing:
-            raise self.fail(key, f"missing key(s) {missing}")
-        return obj
-
     def string(self, obj: Any, key: str, pattern: bool = False) -> str:
         if not isinstance(obj, str) or not obj.strip():
             raise self.fail(key, f"expected a non-empty string, got {obj!r}")
@@ -254,11 +245,6 @@ class _Ctx:
         if obj not in choices:
             raise self.fail(key, f"unknown value {obj!r} (expected one of {list(choices)})")
         return str(obj)
-
-    def boolean(self, obj: Any, key: str) -> bool:
-        if not isinstance(obj, bool):
-            raise self.fail(key, f"expected true/false, got {obj!r}")
-        return obj
 
     def per_scale(self, obj: Any, key: str, item: str) -> dict[str, tuple[Any, ...]]:
         if not isinstance(obj, dict) or not obj:
@@ -280,132 +266,204 @@ class _Ctx:
         return out
 
 
-def _column(ctx: _Ctx, obj: Any, key: str) -> Column:
-    d = ctx.mapping(obj, key, {"key", "label", "direction"}, {"unit", "fmt", "paper_only", "paper_unit"})
-    fmt = d.get("fmt", ".3f")
+# --------------------------------------------------------------------------------------------------
+# the YAML's records, typed (bench.data.config: unknown keys, missing keys and wrong types are errors
+# naming the file and the key path); the checks between records (names, references) follow in code
+
+NonNegative = Annotated[float, Range(lo=0)]
+PaperValues = dict[str, dict[str, float | None]]  # group id -> column key -> value (null = "-")
+
+
+@dataclass(frozen=True)
+class _GroupRecord:
+    dataset: str
+    protocol: str
+    scenes: dict[str, Any]
+    columns: tuple[Column, ...]
+    id: str | None = None
+    label: str | None = None
+    overrides: dict[str, Any] = field(default_factory=dict)
+    effects: dict[str, dict[str, Any]] = field(default_factory=dict)
+    extra_metrics: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class _RowRecord:
+    label: str
+    method: str
+    overrides: dict[str, Any] = field(default_factory=dict)
+    paper: PaperValues | None = None
+    paper_label: str | None = None
+
+
+@dataclass(frozen=True)
+class _PaperRowRecord:
+    label: str
+    paper: PaperValues
+
+
+@dataclass(frozen=True)
+class _Claim:
+    """The keys every claim kind has (``kind`` picks the record: monotone / greater / better)."""
+
+    id: str
+    text: str
+    group: str | tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class _MonotoneClaim(_Claim):
+    kind: Literal["monotone"]
+    metric: str
+    rows: tuple[str, ...]
+    direction: Literal["increasing", "decreasing"]
+    strict: bool = True
+
+
+@dataclass(frozen=True)
+class _GreaterClaim(_Claim):
+    kind: Literal["greater"]
+    metric_a: str
+    metric_b: str
+    row: str | None = None
+    rows: tuple[str, ...] | None = None
+
+
+@dataclass(frozen=True)
+class _BetterClaim(_Claim):
+    kind: Literal["better"]
+    metric: str
+    row_a: str
+    row_b: str
+    direction: Direction | None = None
+    margin: NonNegative = 0.0
+
+
+_CLAIM_RECORDS: dict[str, type] = {"monotone": _MonotoneClaim, "greater": _GreaterClaim, "better": _BetterClaim}
+
+
+@dataclass(frozen=True)
+class _ConvergenceRecord:
+    metric: str
+    flat: NonNegative = ConvergenceSpec.flat  # the defaults are ConvergenceSpec's (one place)
+    drop: NonNegative = ConvergenceSpec.drop
+    seed_std: NonNegative = ConvergenceSpec.seed_std
+
+
+@dataclass(frozen=True)
+class _TableRecord:
+    name: str
+    title: str
+    datasets: tuple[_GroupRecord, ...]
+    seeds: dict[str, Any]
+    rows: tuple[_RowRecord, ...]
+    paper_table: str | None = None
+    paper_only_rows: tuple[_PaperRowRecord, ...] | None = None
+    claims: tuple[dict[str, Any], ...] | None = None
+    notes: tuple[str, ...] | None = None
+    main_metric: str | None = None
+    anchors: Any = None
+    convergence: _ConvergenceRecord | None = None
+
+
+def _column(ctx: _Ctx, col: Column, key: str) -> Column:
+    ctx.string(col.key, f"{key}.key", pattern=True)
+    ctx.string(col.label, f"{key}.label")
     try:
-        format(1.0, ctx.string(fmt, f"{key}.fmt"))
+        format(1.0, ctx.string(col.fmt, f"{key}.fmt"))
     except ValueError as e:
-        raise ctx.fail(f"{key}.fmt", f"bad format {fmt!r}: {e}") from None
-    unit = d.get("unit", "")
-    if unit is None or not isinstance(unit, str):
-        raise ctx.fail(f"{key}.unit", f"expected a string (may be empty), got {unit!r}")
-    return Column(
-        key=ctx.string(d["key"], f"{key}.key", pattern=True),
-        label=ctx.string(d["label"], f"{key}.label"),
-        direction=ctx.choice(d["direction"], f"{key}.direction", DIRECTIONS),  # type: ignore[arg-type]
-        unit=unit,
-        fmt=fmt,
-        paper_only=ctx.boolean(d.get("paper_only", False), f"{key}.paper_only"),
-        paper_unit=None if d.get("paper_unit") is None else ctx.string(d["paper_unit"], f"{key}.paper_unit"),
-    )
+        raise ctx.fail(f"{key}.fmt", f"bad format {col.fmt!r}: {e}") from None
+    if col.paper_unit is not None:
+        ctx.string(col.paper_unit, f"{key}.paper_unit")
+    return col
 
 
-def _group(ctx: _Ctx, obj: Any, key: str) -> DatasetGroup:
-    d = ctx.mapping(
-        obj, key, {"dataset", "protocol", "scenes", "columns"}, {"id", "label", "overrides", "effects", "extra_metrics"}
-    )
-    dataset = ctx.choice(d["dataset"], f"{key}.dataset", DATASET_FORMATS)
-    gid = ctx.string(d.get("id", dataset), f"{key}.id", pattern=True)
-    cols_obj = d["columns"]
-    if not isinstance(cols_obj, list) or not cols_obj:
+def _group(ctx: _Ctx, rec: _GroupRecord, key: str) -> DatasetGroup:
+    dataset = ctx.choice(rec.dataset, f"{key}.dataset", DATASET_FORMATS)
+    gid = ctx.string(rec.id if rec.id is not None else dataset, f"{key}.id", pattern=True)
+    if not rec.columns:
         raise ctx.fail(f"{key}.columns", "expected a non-empty list of columns")
-    columns = tuple(_column(ctx, c, f"{key}.columns[{i}]") for i, c in enumerate(cols_obj))
+    columns = tuple(_column(ctx, c, f"{key}.columns[{i}]") for i, c in enumerate(rec.columns))
     keys = [c.key for c in columns]
     if len(set(keys)) != len(keys):
         raise ctx.fail(f"{key}.columns", f"duplicate column keys in {keys}")
     if all(c.paper_only for c in columns):
         raise ctx.fail(f"{key}.columns", "every column is paper_only: nothing to measure")
-    overrides = d.get("overrides", {})
-    if not isinstance(overrides, dict):
-        raise ctx.fail(f"{key}.overrides", f"expected a mapping, got {overrides!r}")
-    effects = d.get("effects", {}) or {}
-    if not isinstance(effects, dict) or not all(isinstance(v, dict) for v in effects.values()):
-        raise ctx.fail(f"{key}.effects", f"expected {{effect name: {{parameter: value}}}}, got {effects!r}")
-    extra = d.get("extra_metrics", [])
-    extra_t = ctx.strlist(extra, f"{key}.extra_metrics") if extra else ()
+    extra_t = tuple(ctx.string(x, f"{key}.extra_metrics[{i}]") for i, x in enumerate(rec.extra_metrics))
     if set(extra_t) & set(keys):
         raise ctx.fail(f"{key}.extra_metrics", f"{sorted(set(extra_t) & set(keys))} are already columns")
     return DatasetGroup(
         id=gid,
-        label=ctx.string(d.get("label", gid), f"{key}.label"),
+        label=ctx.string(rec.label if rec.label is not None else gid, f"{key}.label"),
         dataset=dataset,
-        protocol=ctx.choice(d["protocol"], f"{key}.protocol", PROTOCOLS),
-        scenes=ctx.per_scale(d["scenes"], f"{key}.scenes", "scenes"),
+        protocol=ctx.choice(rec.protocol, f"{key}.protocol", PROTOCOLS),
+        scenes=ctx.per_scale(rec.scenes, f"{key}.scenes", "scenes"),
         columns=columns,
-        overrides=dict(overrides),
-        effects={k: dict(v) for k, v in effects.items()},
+        overrides=dict(rec.overrides),
+        effects={k: dict(v) for k, v in rec.effects.items()},
         extra_metrics=extra_t,
     )
 
 
-def _paper(ctx: _Ctx, obj: Any, key: str, groups: tuple[DatasetGroup, ...]) -> dict[str, dict[str, float | None]] | None:
-    if obj is None:
+def _paper(ctx: _Ctx, values: PaperValues | None, key: str, groups: tuple[DatasetGroup, ...]) -> dict[str, dict[str, float | None]] | None:
+    """Paper values checked against the groups' columns (their types are checked by the record)."""
+    if values is None:
         return None
-    if not isinstance(obj, dict):
-        raise ctx.fail(key, f"expected a mapping group -> {{metric: value}} or null, got {obj!r}")
     by_id = {g.id: g for g in groups}
-    out: dict[str, dict[str, float | None]] = {}
-    for gid, vals in obj.items():
+    for gid, vals in values.items():
         k = f"{key}.{gid}"
         if gid not in by_id:
             raise ctx.fail(k, f"unknown group {gid!r} (groups: {sorted(by_id)})")
-        if not isinstance(vals, dict):
-            raise ctx.fail(k, f"expected a mapping metric -> value, got {vals!r}")
-        out[gid] = {}
-        for m, v in vals.items():
+        for m in vals:
             if by_id[gid].column(m) is None:
                 raise ctx.fail(f"{k}.{m}", f"unknown column (columns: {[c.key for c in by_id[gid].columns]})")
-            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float))):
-                raise ctx.fail(f"{k}.{m}", f"expected a number or null, got {v!r}")
-            out[gid][m] = None if v is None else float(v)
-    return out
+    return {gid: dict(vals) for gid, vals in values.items()}
 
 
-def _row(ctx: _Ctx, obj: Any, key: str, groups: tuple[DatasetGroup, ...], paper_only: bool) -> RowSpec:
-    if paper_only:
-        d = ctx.mapping(obj, key, {"label", "paper"}, set())
-        paper = _paper(ctx, d["paper"], f"{key}.paper", groups)
-        if not paper:
-            raise ctx.fail(f"{key}.paper", "a paper-only row needs paper values")
-        return RowSpec(label=ctx.string(d["label"], f"{key}.label"), method=None, paper=paper)
-    d = ctx.mapping(obj, key, {"label", "method"}, {"overrides", "paper", "paper_label"})
-    overrides = d.get("overrides", {}) or {}
-    if not isinstance(overrides, dict):
-        raise ctx.fail(f"{key}.overrides", f"expected a mapping, got {overrides!r}")
-    paper_label = d.get("paper_label")
+def _row(ctx: _Ctx, rec: _RowRecord, key: str, groups: tuple[DatasetGroup, ...]) -> RowSpec:
     return RowSpec(
-        label=ctx.string(d["label"], f"{key}.label"),
-        method=ctx.string(d["method"], f"{key}.method", pattern=True),
-        overrides=dict(overrides),
-        paper=_paper(ctx, d.get("paper"), f"{key}.paper", groups),
-        paper_label=None if paper_label is None else ctx.string(paper_label, f"{key}.paper_label"),
+        label=ctx.string(rec.label, f"{key}.label"),
+        method=ctx.string(rec.method, f"{key}.method", pattern=True),
+        overrides=dict(rec.overrides),
+        paper=_paper(ctx, rec.paper, f"{key}.paper", groups),
+        paper_label=None if rec.paper_label is None else ctx.string(rec.paper_label, f"{key}.paper_label"),
     )
 
 
+def _paper_row(ctx: _Ctx, rec: _PaperRowRecord, key: str, groups: tuple[DatasetGroup, ...]) -> RowSpec:
+    paper = _paper(ctx, rec.paper, f"{key}.paper", groups)
+    if not paper:
+        raise ctx.fail(f"{key}.paper", "a paper-only row needs paper values")
+    return RowSpec(label=ctx.string(rec.label, f"{key}.label"), method=None, paper=paper)
+
+
 def _claim(ctx: _Ctx, obj: Any, key: str, groups: tuple[DatasetGroup, ...], rows: tuple[RowSpec, ...]) -> ClaimSpec:
-    common = {"id", "text", "kind", "group"}
     if not isinstance(obj, dict):
         raise ctx.fail(key, f"expected a mapping, got {type(obj).__name__}")
     kind = ctx.choice(obj.get("kind"), f"{key}.kind", CLAIM_KINDS)
-    if kind == "monotone":
-        d = ctx.mapping(obj, key, common | {"metric", "rows", "direction"}, {"strict"})
-        row_names = ctx.strlist(d["rows"], f"{key}.rows")
+    rec: _MonotoneClaim | _GreaterClaim | _BetterClaim = load_config(_CLAIM_RECORDS[kind], obj, ctx.path, key=key)
+    direction: str | None = None
+    if isinstance(rec, _MonotoneClaim):
+        row_names = tuple(ctx.string(r, f"{key}.rows[{i}]") for i, r in enumerate(rec.rows))
         if len(row_names) < 2:
             raise ctx.fail(f"{key}.rows", "a monotone claim needs at least two rows")
-        direction = ctx.choice(d["direction"], f"{key}.direction", TREND_DIRECTIONS)
-    elif kind == "greater":
-        d = ctx.mapping(obj, key, common | {"metric_a", "metric_b"}, {"row", "rows"})
-        if ("row" in d) == ("rows" in d):
+        direction = rec.direction
+        metrics = [rec.metric]
+    elif isinstance(rec, _GreaterClaim):
+        if (rec.row is None) == (rec.rows is None):
             raise ctx.fail(key, "a greater claim needs exactly one of `row` or `rows`")
-        row_names = (ctx.string(d["row"], f"{key}.row"),) if "row" in d else ctx.strlist(d["rows"], f"{key}.rows")
-        direction = None
+        row_names = (ctx.string(rec.row, f"{key}.row"),) if rec.row is not None else \
+            tuple(ctx.string(r, f"{key}.rows[{i}]") for i, r in enumerate(rec.rows or ()))
+        if not row_names:
+            raise ctx.fail(f"{key}.rows", "expected a non-empty list")
+        metrics = [rec.metric_a, rec.metric_b]
     else:
-        d = ctx.mapping(obj, key, common | {"metric", "row_a", "row_b"}, {"direction", "margin"})
-        row_names = (ctx.string(d["row_a"], f"{key}.row_a"), ctx.string(d["row_b"], f"{key}.row_b"))
-        direction = ctx.choice(d["direction"], f"{key}.direction", DIRECTIONS) if "direction" in d else None
-    g = d["group"]
-    gids = (ctx.string(g, f"{key}.group"),) if isinstance(g, str) else ctx.strlist(g, f"{key}.group")
+        row_names = (ctx.string(rec.row_a, f"{key}.row_a"), ctx.string(rec.row_b, f"{key}.row_b"))
+        direction = rec.direction
+        metrics = [rec.metric]
+    gids = (rec.group,) if isinstance(rec.group, str) else rec.group
+    if not gids:
+        raise ctx.fail(f"{key}.group", "expected a group id or a non-empty list of them")
     by_id = {x.id: x for x in groups}
     for gid in gids:
         if gid not in by_id:
@@ -414,7 +472,6 @@ def _claim(ctx: _Ctx, obj: Any, key: str, groups: tuple[DatasetGroup, ...], rows
     for r in row_names:
         if r not in labels:
             raise ctx.fail(key, f"unknown row {r!r} (measured rows: {sorted(labels)})")
-    metrics = [d["metric"]] if kind != "greater" else [d["metric_a"], d["metric_b"]]
     for m in metrics:
         ctx.string(m, f"{key}.metric")
         for gid in gids:
@@ -425,37 +482,30 @@ def _claim(ctx: _Ctx, obj: Any, key: str, groups: tuple[DatasetGroup, ...], rows
             col = grp.column(m)
             if col is not None and col.paper_only:
                 raise ctx.fail(f"{key}.metric", f"{m!r} is paper_only in group {gid!r}: we never measure it")
-            if kind == "better" and col is None and direction is None:
+            if isinstance(rec, _BetterClaim) and col is None and direction is None:
                 raise ctx.fail(f"{key}.direction", f"{m!r} is not a column: give direction: higher|lower")
     return ClaimSpec(
-        id=ctx.string(d["id"], f"{key}.id", pattern=True),
-        text=ctx.string(d["text"], f"{key}.text"),
+        id=ctx.string(rec.id, f"{key}.id", pattern=True),
+        text=ctx.string(rec.text, f"{key}.text"),
         kind=kind,  # type: ignore[arg-type]
-        groups=gids,
+        groups=tuple(gids),
         rows=row_names,
-        metric=d.get("metric"),
+        metric=None if isinstance(rec, _GreaterClaim) else rec.metric,
         direction=direction,
-        strict=ctx.boolean(d.get("strict", True), f"{key}.strict"),
-        metric_a=d.get("metric_a"),
-        metric_b=d.get("metric_b"),
-        margin=_margin(ctx, d.get("margin", 0.0), f"{key}.margin"),
+        strict=rec.strict if isinstance(rec, _MonotoneClaim) else True,
+        metric_a=rec.metric_a if isinstance(rec, _GreaterClaim) else None,
+        metric_b=rec.metric_b if isinstance(rec, _GreaterClaim) else None,
+        margin=rec.margin if isinstance(rec, _BetterClaim) else 0.0,
     )
 
 
-def _margin(ctx: _Ctx, value: Any, key: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(float(value)) or value < 0:
-        raise ctx.fail(key, f"expected a number >= 0, got {value!r}")
-    return float(value)
-
-
-def _convergence(ctx: _Ctx, obj: Any, key: str, groups: tuple[DatasetGroup, ...]) -> ConvergenceSpec:
-    d = ctx.mapping(obj, key, {"metric"}, {"flat", "drop", "seed_std"})
-    metric = ctx.string(d["metric"], f"{key}.metric")
+def _convergence(ctx: _Ctx, rec: _ConvergenceRecord, key: str, groups: tuple[DatasetGroup, ...]) -> ConvergenceSpec:
+    metric = ctx.string(rec.metric, f"{key}.metric")
     col = next((c for g in groups for c in g.columns if c.key == metric and not c.paper_only), None)
     if col is None:
         raise ctx.fail(f"{key}.metric", f"{metric!r} is not a measured column of any group")
-    tol = {k: _margin(ctx, d[k], f"{key}.{k}") for k in ("flat", "drop", "seed_std") if k in d}
-    return ConvergenceSpec(metric=metric, higher_is_better=col.direction == "higher", **tol)
+    return ConvergenceSpec(metric=metric, flat=rec.flat, drop=rec.drop, seed_std=rec.seed_std,
+                           higher_is_better=col.direction == "higher")
 
 
 # --------------------------------------------------------------------------------------------------
@@ -465,65 +515,56 @@ def _convergence(ctx: _Ctx, obj: Any, key: str, groups: tuple[DatasetGroup, ...]
 def parse_table_spec(obj: Any, where: str | Path = "<table spec>") -> TableSpec:
     """Validate an already-loaded YAML mapping; errors name ``where`` and the key path."""
     ctx = _Ctx(where)
-    d = ctx.mapping(
-        obj, "", {"name", "title", "datasets", "seeds", "rows"},
-        {"paper_table", "paper_only_rows", "claims", "notes", "main_metric", "anchors", "convergence"},
-    )
-    name = ctx.string(d["name"], "name", pattern=True)
+    if not isinstance(obj, dict):
+        raise ctx.fail("", f"expected a mapping, got {type(obj).__name__}")
+    d = load_config(_TableRecord, obj, ctx.path)
+    name = ctx.string(d.name, "name", pattern=True)
     if isinstance(where, Path) and where.suffix in (".yaml", ".yml") and where.stem != name:
         raise ctx.fail("name", f"{name!r} differs from the file name {where.stem!r}")
-    if not isinstance(d["datasets"], list) or not d["datasets"]:
+    if not d.datasets:
         raise ctx.fail("datasets", "expected a non-empty list of column groups")
-    groups = tuple(_group(ctx, g, f"datasets[{i}]") for i, g in enumerate(d["datasets"]))
+    groups = tuple(_group(ctx, g, f"datasets[{i}]") for i, g in enumerate(d.datasets))
     ids = [g.id for g in groups]
     if len(set(ids)) != len(ids):
         raise ctx.fail("datasets", f"duplicate group ids {ids}: give each group a distinct `id`")
-    seeds = ctx.per_scale(d["seeds"], "seeds", "seeds")
-    for g, i in zip(groups, range(len(groups))):
+    seeds = ctx.per_scale(d.seeds, "seeds", "seeds")
+    for i, g in enumerate(groups):
         missing = sorted(set(seeds) - set(g.scenes))
         if missing:
             raise ctx.fail(f"datasets[{i}].scenes", f"missing scale(s) {missing} (seeds define {sorted(seeds)})")
         extra = sorted(set(g.scenes) - set(seeds))
         if extra:
             raise ctx.fail("seeds", f"missing scale(s) {extra} used by datasets[{i}].scenes")
-    if not isinstance(d["rows"], list) or not d["rows"]:
+    if not d.rows:
         raise ctx.fail("rows", "expected a non-empty list of rows")
-    rows = tuple(_row(ctx, r, f"rows[{i}]", groups, False) for i, r in enumerate(d["rows"]))
-    pobj = d.get("paper_only_rows") or []
-    if not isinstance(pobj, list):
-        raise ctx.fail("paper_only_rows", "expected a list")
-    prows = tuple(_row(ctx, r, f"paper_only_rows[{i}]", groups, True) for i, r in enumerate(pobj))
+    rows = tuple(_row(ctx, r, f"rows[{i}]", groups) for i, r in enumerate(d.rows))
+    prows = tuple(_paper_row(ctx, r, f"paper_only_rows[{i}]", groups) for i, r in enumerate(d.paper_only_rows or ()))
     labels = [r.label for r in rows + prows]
     dup = sorted({x for x in labels if labels.count(x) > 1})
     if dup:
         raise ctx.fail("rows", f"duplicate row label(s) {dup}")
-    cobj = d.get("claims") or []
-    if not isinstance(cobj, list):
-        raise ctx.fail("claims", "expected a list")
-    claims = tuple(_claim(ctx, c, f"claims[{i}]", groups, rows) for i, c in enumerate(cobj))
+    claims = tuple(_claim(ctx, c, f"claims[{i}]", groups, rows) for i, c in enumerate(d.claims or ()))
     cids = [c.id for c in claims]
     if len(set(cids)) != len(cids):
         raise ctx.fail("claims", f"duplicate claim ids {cids}")
-    notes = d.get("notes") or []
-    main = d.get("main_metric")
+    main = d.main_metric
     if main is not None:
         ctx.string(main, "main_metric")
         if not any(c.key == main and not c.paper_only for g in groups for c in g.columns):
             raise ctx.fail("main_metric", f"{main!r} is not a measured column of any group")
-    convergence = _convergence(ctx, d["convergence"], "convergence", groups) if d.get("convergence") is not None else None
     return TableSpec(
         name=name,
-        title=ctx.string(d["title"], "title"),
-        paper_table=ctx.string(d["paper_table"], "paper_table") if "paper_table" in d else "",  # a user's own table may have none
+        title=ctx.string(d.title, "title"),
+        paper_table=ctx.string(d.paper_table, "paper_table") if d.paper_table is not None else "",  # a user's own table may have none
         groups=groups,
         seeds=seeds,
         rows=rows,
         paper_only_rows=prows,
         claims=claims,
-        notes=ctx.strlist(notes, "notes") if notes else (),
+        notes=tuple(ctx.string(n, f"notes[{i}]") for i, n in enumerate(d.notes or ())),
         main_metric_key=main,
         path=str(where),
-        convergence=convergence,
+        convergence=_convergence(ctx, d.convergence, "convergence", groups) if d.convergence is not None else None,
     )
 
 
@@ -557,20 +598,3 @@ def resolve(spec: TableSpec, scale: str) -> Resolved:
         raise BenchInputError(spec.path or spec.name, f"seeds: no scale {scale!r} (defined: {list(spec.seeds)})")
     return Resolved(scale=scale, scenes={g.id: tuple(g.scenes[scale]) for g in spec.groups}, seeds=tuple(spec.seeds[scale]))
 
-
-def plan_jobs(spec: TableSpec, scale: str) -> list[JobPlan]:
-    """Every job the table expects at ``scale``: measured rows x groups x scenes x seeds.
-
-    The job's overrides are the group's overrides updated by the row's (the row wins on a clash).
-    """
-    res = resolve(spec, scale)
-    jobs: list[JobPlan] = []
-    for row in spec.rows:
-        assert row.method is not None
-        for g in spec.groups:
-            overrides = {**g.overrides, **row.overrides}
-            for scene in res.scenes[g.id]:
-                for seed in res.seeds:
-                    jobs.append(JobPlan(spec.name, row.label, row.method, overrides, g.id, g.dataset,
-                                        g.protocol, scene, seed, scale, g.effects))
-    return jobs

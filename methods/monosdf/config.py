@@ -1,0 +1,96 @@
+"""The typed config of the ``monosdf`` method (and of every method built on it).
+
+Names and types only: the values, with the MonoSDF value beside each CPU-driven change, are the YAML
+preset ``configs/methods/monosdf.yaml`` (defaults <- scale preset <- overrides, resolved by
+:func:`methods.registry.method_config`). :func:`bench.data.config.load_config` fills this class and
+rejects unknown keys, missing keys, wrong types and values outside the ranges below.
+
+Units: lengths are in the normalised scene units of the MonoSDF convention (the scene scaled into the
+unit sphere by ``Scene.scale_mat``); fractions are of the training schedule (``iterations``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Annotated, Literal
+
+from bench.data.config import Range
+
+Positive = Range(lo=0, lo_open=True)
+NonNegative = Range(lo=0)
+Fraction = Range(lo=0, hi=1)
+AtLeastOne = Range(lo=1)
+
+
+@dataclass(frozen=True)
+class MonoSDFConfig:
+    """MonoSDF (grid variant) on a CPU; every key is documented in ``configs/methods/monosdf.yaml``."""
+
+    # schedule and batch
+    iterations: Annotated[int, AtLeastOne]
+    fractions: tuple[Annotated[float, Range(lo=0, hi=1, lo_open=True)], ...]
+    rays_per_batch: Annotated[int, AtLeastOne]
+    images_per_batch: Annotated[int, AtLeastOne]
+    # sampler
+    n_coarse: Annotated[int, AtLeastOne]
+    n_fine: Annotated[int, NonNegative]
+    near: Annotated[float, Positive]
+    bounding_sphere: Annotated[float, Positive]
+    # field and its initialisation
+    inside_out: bool | Literal["auto"]
+    init_radius: Annotated[float, Positive]
+    grid_levels: Annotated[int, AtLeastOne]
+    grid_features: Annotated[int, AtLeastOne]
+    grid_log2_table: Annotated[int, Range(lo=4, hi=24)]
+    grid_base_res: Annotated[int, Range(lo=2)]
+    grid_max_res: Annotated[int, Range(lo=2)]
+    grid_levels_initial: Annotated[int, AtLeastOne] | None
+    grid_level_every: Annotated[float, NonNegative]
+    mlp_hidden: Annotated[int, AtLeastOne]
+    mlp_layers: Annotated[int, AtLeastOne]
+    geo_features: Annotated[int, AtLeastOne]
+    color_hidden: Annotated[int, AtLeastOne]
+    color_layers: Annotated[int, AtLeastOne]
+    appearance_dim: Annotated[int, NonNegative]
+    pe_frequencies: Annotated[int, NonNegative]
+    # optimiser
+    lr: Annotated[float, Positive]
+    grid_lr_factor: Annotated[float, Positive]
+    beta_lr_factor: Annotated[float, NonNegative]
+    lr_decay: Annotated[float, Positive]
+    lr_warmup: Annotated[float, Fraction]
+    # density
+    beta_init: Annotated[float, Positive]
+    beta_min: Annotated[float, NonNegative]
+    beta_floor: Annotated[float, NonNegative]
+    beta_floor_until: Annotated[float, Fraction]
+    # losses
+    color_weight: Annotated[float, NonNegative]
+    eikonal_weight: Annotated[float, NonNegative]
+    depth_weight: Annotated[float, NonNegative]
+    depth_warmup: Annotated[float, Fraction]
+    prior_loss_form: Literal["monosdf", "code"]
+    depth_negative_scale: Literal["keep", "drop"]
+    depth_fit: Literal["ssi", "metric"]
+    normal_weight: Annotated[float, NonNegative]
+    smooth_weight: Annotated[float, NonNegative]
+    smooth_jitter: Annotated[float, NonNegative]
+    eikonal_ray_sample: Literal["random", "max_weight", "all"]
+    prune_weight: Annotated[float, NonNegative]
+    # diagnostics, meshing, runtime
+    diag_views: Annotated[int, NonNegative]
+    diag_stride: Annotated[int, AtLeastOne]
+    mesh_resolution: Annotated[int, Range(lo=8)]
+    mesh_extent: Annotated[float, Positive] | None
+    fast_grid: bool
+    threads: Annotated[int, NonNegative]
+
+    def check(self) -> str | None:
+        """Constraints between keys (``bench.data.config.load_config`` raises the returned problem)."""
+        if self.grid_max_res < self.grid_base_res:
+            return f"grid_max_res ({self.grid_max_res}) must be >= grid_base_res ({self.grid_base_res})"
+        if self.grid_levels_initial is not None and self.grid_levels_initial > self.grid_levels:
+            return f"grid_levels_initial ({self.grid_levels_initial}) must be <= grid_levels ({self.grid_levels})"
+        if list(self.fractions) != sorted(self.fractions) or not self.fractions:
+            return f"fractions must be a non-empty increasing list in (0, 1], got {list(self.fractions)}"
+        return None
