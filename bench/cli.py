@@ -1,6 +1,7 @@
 """The ``bench`` command line.
 
     bench list                                   methods, tables, scenes
+    bench config METHOD [--scale S] [--set K=V]  a method's resolved, checked config (value and type per key)
     bench scenes make RECIPE --out DIR           synthesise a scene into a dataset folder
     bench scenes downsize SRC DST --factor N     a dataset folder at 1/N of its image size, same format
     bench run --table NAME [--scale small] ...   run a table's jobs, write CSV / markdown / plot
@@ -249,6 +250,28 @@ def cmd_scenes_downsize(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_config(args: argparse.Namespace) -> int:
+    """Print a method's config as a job would get it (YAML defaults <- scale preset <- ``--set``), checked
+    against the method's typed config, one ``key: value  # type`` line per key."""
+    import json
+    from typing import get_type_hints
+
+    from bench.data.config import describe_type
+    from bench.study import parse_overrides
+    from methods.registry import config_type, method_config
+
+    cfg = method_config(args.method, args.scale, parse_overrides(args.set))
+    ctype = config_type(args.method)
+    hints = get_type_hints(ctype, include_extras=True) if ctype is not None else {}
+    width = max((len(k) for k in cfg), default=0)
+    print(f"# method {args.method!r}, scale {args.scale!r}" + (f", overrides {parse_overrides(args.set)}" if args.set else "")
+          + (f" (typed: {ctype.__module__}.{ctype.__name__})" if ctype is not None else " (a plugin without config_type: unchecked)"))
+    for key, value in cfg.items():
+        kind = f"  # {describe_type(hints[key])}" if key in hints else ""
+        print(f"{key:<{width}}  {json.dumps(value)}{kind}")
+    return 0
+
+
 def cmd_fit(args: argparse.Namespace) -> int:
     from bench.fit import fit_folder
     from bench.study import parse_overrides
@@ -269,6 +292,12 @@ def build_parser() -> argparse.ArgumentParser:
     lst = sub.add_parser("list", help="list methods, tables and scenes")
     _add_tables_dir(lst)
     lst.set_defaults(func=cmd_list)
+
+    config = sub.add_parser("config", help="a method's resolved config, checked against its typed config")
+    config.add_argument("method")
+    config.add_argument("--scale", default="small", choices=SCALES)
+    config.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE", help="overrides (YAML values), as a table row's")
+    config.set_defaults(func=cmd_config)
 
     scenes = sub.add_parser("scenes", help="scene datasets").add_subparsers(dest="scenes_command", required=True)
     make = scenes.add_parser("make", help="synthesise a recipe into a dataset folder in its on-disk format")

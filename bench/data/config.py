@@ -105,7 +105,10 @@ def _convert(tp: Any, value: Any, key: str, where: str) -> Any:
     if tp is Any:
         return value
     if origin is Annotated:
-        out = _convert(args[0], value, key, where)
+        try:
+            out = _convert(args[0], value, key, where)
+        except _Mismatch as bad:
+            raise (_Mismatch(key, describe_type(tp), value) if bad.key == key else bad) from None
         for meta in tp.__metadata__:
             if isinstance(meta, Range) and not meta.holds(float(out)):
                 raise _Mismatch(key, describe_type(tp), value)

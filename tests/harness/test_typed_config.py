@@ -112,3 +112,15 @@ def test_protocol_parameters_are_typed_registry_entries():
         for scale in ("tiny", "small", "medium", "large"):
             assert isinstance(protocol_params(name, scale), entry.params_type)
     assert protocol_params("scannet", "small").tsdf_voxel == 0.02 and protocol_params("scannet", "large").tsdf_voxel == 0.01
+
+
+def test_bench_config_prints_the_checked_config_and_rejects_bad_overrides(capsys):
+    from bench.cli import main
+
+    assert main(["config", "monosdf", "--scale", "tiny", "--set", "lr=1e-3", "prune_weight=0"]) == 0
+    out = capsys.readouterr().out
+    assert "typed: methods.monosdf.config.MonoSDFConfig" in out
+    assert any(line.startswith("lr ") and "0.001" in line and "# a number in (0, inf)" in line for line in out.splitlines())
+    assert main(["config", "monosdf", "--set", "lr=fast"]) == 2
+    assert "config key 'lr' must be a number in (0, inf) (got 'fast')" in capsys.readouterr().err
+    assert main(["config", "monosdf", "--set", "lr_typo=1"]) == 2  # not a key of the method
