@@ -192,8 +192,8 @@ def dtu_setup(scene: Scene, params: DTUProtocolParams, seed: int) -> dict[str, A
     * ``cull: monosdf``: every view's object mask, dilated by MonoSDF's 12 px scaled to the width
       (``cull_masks``; None for ``cull: none``).
     """
-    from metrics.render import render_depth_maps
     from metrics.dtu import DTUParams, dtu_gt_points
+    from metrics.render import render_depth_maps
 
     layout = (scene.metadata or {}).get("layout") or {}
     where = Path(scene.root) / "meta.json" if scene.root else scene.name

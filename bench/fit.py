@@ -29,8 +29,8 @@ def fit_folder(method: str, path: Path, scale: str, overrides: dict[str, Any], o
         The result row (also written to ``out/fit.json``).
     """
     from bench.artifacts import write_job_artifacts
-    from bench.evaluate import evaluate_snapshot
     from bench.data.formats import detect_format, load_scene
+    from bench.evaluate import evaluate_snapshot
     from methods.registry import get_method, method_config
 
     path = Path(path)

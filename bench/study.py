@@ -29,9 +29,10 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from bench.data.atomic import atomic_write_bytes, atomic_write_text
 from bench.convergence import ConvergenceSpec, check_run
+from bench.data.atomic import atomic_write_bytes, atomic_write_text
 from bench.data.errors import BenchInputError
+
 
 @dataclasses.dataclass(frozen=True)
 class StudyRun:

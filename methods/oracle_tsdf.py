@@ -25,8 +25,8 @@ from bench.data.errors import BenchInputError
 from bench.data.scene import Scene
 from methods.base import Artifacts, ProgressFn, Snapshot
 from methods.registry import register
-from metrics.tsdf import block_resolution_for, tsdf_refuse
 from metrics.depth import align_depth
+from metrics.tsdf import block_resolution_for, tsdf_refuse
 
 
 @dataclass(frozen=True)

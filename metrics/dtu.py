@@ -38,9 +38,9 @@ import numpy as np
 
 from metrics._checks import as_cameras, as_points, check_positive
 from metrics.culling import points_visible
-from metrics.render import render_depth_maps
 from metrics.mesh import EmptyReconstructionError, check_pred_mesh, clean_mesh
 from metrics.nn import nearest_neighbor
+from metrics.render import render_depth_maps
 
 DTU_REFERENCE_SIZE_MM = 350.0
 DTU_DENSITY_MM = 0.2

@@ -104,7 +104,6 @@ def load_dataset(scene_name: str, scale: str, cache_dir: Path = DEFAULT_CACHE,
                  effects: Mapping[str, Mapping[str, Any]] | None = None) -> Scene:
     """Synthesise (if needed) and load a scene; LLFF scenes load their ``images_N`` downsampled copy."""
     from bench.data.formats import load_scene
-
     from bench.data.synth.recipe import load_recipe
 
     if is_folder_scene(scene_name):  # a user's own folder: loaded as it is (LLFF at its full resolution)

@@ -23,9 +23,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence
 
-from bench.executors.lifeline import FORKSERVER_PRELOAD, exit_with_parent, mark_parent
 from bench.executors.base import DEFAULT_RETRIES, Event, Executor, ProgressFactory, execute_job, lost_row, set_job_threads, threads_per_job
-
+from bench.executors.lifeline import FORKSERVER_PRELOAD, exit_with_parent, mark_parent
 from bench.jobs import Job
 
 START_METHOD = "forkserver"

@@ -29,9 +29,9 @@ import numpy as np
 import torch
 
 from bench.data.scene import Scene
-from methods.gaussians.config import GaussianConfig
 from methods.base import Artifacts, Snapshot
 from methods.gaussians import losses
+from methods.gaussians.config import GaussianConfig
 from methods.gaussians.model import init_params, init_points_from_views, render
 from methods.gaussians.strategy import DefaultStrategy
 from metrics.image import psnr
@@ -189,8 +189,9 @@ def _render_depths(params, views, viewmats, Ks, W, H, deg, bg, rkw, min_alpha: f
 
 def _uncertainty_stage(scene, train, params, viewmats, Ks, W, H, deg, bg, rkw, cfg, seed):
     """Run the shared estimator on the training views; per-view depth weights and mask-constraint data."""
-    from methods.monoinstance import run_uncertainty_stage  # the estimator shared with the SDF method
     from scipy.ndimage import distance_transform_edt
+
+    from methods.monoinstance import run_uncertainty_stage  # the estimator shared with the SDF method
 
     ref_depth = _render_depths(params, train, viewmats, Ks, W, H, deg, bg, rkw)
     sub = restrict_scene(scene, train)

@@ -38,14 +38,15 @@ instance flagged background (their uncertainty is 0 either way).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from methods.monoinstance.config import UncertaintyStageConfig, load_stage_config
 from metrics.camera import backproject_pixels
+
 
 @dataclass
 class Association:

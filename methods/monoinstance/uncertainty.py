@@ -38,14 +38,15 @@ scene_radius``; ``vol_norm = vol_m / scene_radius^3``; ``r_m = r_norm * scene_ra
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from methods.monoinstance.config import UncertaintyStageConfig, load_stage_config
 from metrics.camera import backproject_pixels
+
 
 @dataclass
 class InstanceUncertainty:

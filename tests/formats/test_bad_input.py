@@ -7,13 +7,12 @@ import zipfile
 
 import numpy as np
 import pytest
+from fmt_helpers import write
 from PIL import Image
 
 from bench.data.errors import BenchInputError
 from bench.data.formats import detect_format, load_scene, write_scene
 from bench.data.formats.npz import load_npz, save_npz
-
-from fmt_helpers import write
 
 
 @pytest.fixture()

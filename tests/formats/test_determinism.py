@@ -6,7 +6,6 @@ import time
 import zipfile
 
 import pytest
-
 from fmt_helpers import FORMATS, write
 
 

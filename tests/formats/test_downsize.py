@@ -5,12 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from fmt_helpers import FORMATS, write
 
 from bench.cli import main
 from bench.data.formats import load_scene
 from bench.data.formats.downsize import downsize_depth, downsize_ids, downsize_intrinsics, downsize_normal, downsize_rgb
-
-from fmt_helpers import FORMATS, write
 
 
 def _loop(arr, n, fn):

@@ -5,12 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
+from fmt_helpers import FORMATS, quantised, strip_extras, write
 from PIL import Image
 
 from bench.data.formats import detect_format, load_scene
-from bench.data.formats.llff import scale_intrinsics, resize_nearest
-
-from fmt_helpers import FORMATS, quantised, strip_extras, write
+from bench.data.formats.llff import resize_nearest, scale_intrinsics
 
 
 def assert_cameras(loaded, scene):

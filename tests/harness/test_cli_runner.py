@@ -7,12 +7,11 @@ from pathlib import Path
 
 import pytest
 
-from bench.executors.local import LocalExecutor
-
 from bench.cli import main
+from bench.executors.local import LocalExecutor
 from bench.jobs import Job, JobPlan
-from bench.runner import job_id_for, plan_index, resolve_jobs, run_jobs
 from bench.pipeline import plan_jobs
+from bench.runner import job_id_for, plan_index, resolve_jobs, run_jobs
 from bench.table_spec import load_table_spec
 from methods.registry import available_methods, method_config
 

@@ -10,12 +10,12 @@ from typing import Any
 import pandas as pd
 import pytest
 import yaml
+from label_match import build_table_by_label
 
 from bench.convergence import ConvergenceSpec, check_run, judge_row
 from bench.results_io import collect_results
 from bench.table_markdown import to_markdown
 from bench.table_spec import load_table_spec
-from label_match import build_table_by_label
 
 F = ConvergenceSpec()  # F-score: flat 0.03, drop 0.05, seed std 0.03
 

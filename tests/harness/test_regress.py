@@ -9,13 +9,13 @@ from typing import Any
 
 import pytest
 import yaml
+from label_match import build_table_by_label
 
 from bench.cli import main
 from bench.data.errors import BenchInputError
 from bench.regress import RegressResult, compare, make_reference, summarise, to_markdown
 from bench.results_io import collect_results
 from bench.table_spec import TableSpec, load_table_spec
-from label_match import build_table_by_label
 
 SPEC: dict[str, Any] = {
     "name": "abl", "title": "Regression test table", "paper_table": "Table 4",

@@ -12,13 +12,13 @@ import numpy as np
 import pandas as pd
 import pytest
 import yaml
+from label_match import build_table_by_label
 
 from bench.data.errors import BenchInputError
 from bench.report import render_report, write_table_outputs
 from bench.results_io import collect_results
 from bench.table_markdown import to_markdown
 from bench.table_spec import TableSpec, load_table_spec
-from label_match import build_table_by_label
 
 SPEC: dict[str, Any] = {
     "name": "abl",

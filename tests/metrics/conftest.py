@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from metrics.camera import look_at
 
 ASSETS = Path(__file__).resolve().parents[3] / "shared" / "assets" / "meshes"

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from metrics.render import render_depth_maps
 from metrics.mask_cull import cull_mesh_by_masks, dilate_masks, dilation_radius, vertices_kept
+from metrics.render import render_depth_maps
 
 
 def _kept_reference(vertices, masks, K, c2w):

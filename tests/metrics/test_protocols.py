@@ -3,11 +3,11 @@ import pytest
 import trimesh
 
 from metrics.culling import crop_mesh_to_bbox, cull_mesh_to_frusta, cull_mesh_to_visible, gt_bounding_box, points_in_frusta
-from metrics.render import render_depth_maps
-from metrics.tsdf import _block_coords, _touched_block_keys, tsdf_refuse, voxel_downsample
 from metrics.dtu import DTUParams, dtu_chamfer, dtu_gt_points, radius_downsample, sample_mesh_dtu
 from metrics.mesh import EmptyReconstructionError
 from metrics.protocols import cull_replica_gt, evaluate_mesh_replica, evaluate_mesh_scannet, sample_replica_gt
+from metrics.render import render_depth_maps
+from metrics.tsdf import _block_coords, _touched_block_keys, tsdf_refuse, voxel_downsample
 
 
 def test_frustum_test_and_depth_rendering_are_z_depth():

@@ -16,7 +16,6 @@ from scipy import ndimage
 
 from bench.data.errors import BenchInputError
 from bench.data.scene import InstanceInfo, Scene
-from metrics.camera import look_at, pixel_rays
 from bench.data.synth.effects import (
     EFFECTS,
     PRIOR_PROFILES,
@@ -25,6 +24,7 @@ from bench.data.synth.effects import (
     normals_from_depth,
     thin_mask,
 )
+from metrics.camera import look_at, pixel_rays
 
 H, W = 48, 64
 FLOOR, POLE, BOX, WALL = 1, 2, 3, 4

@@ -11,12 +11,12 @@ import trimesh
 import yaml
 
 from bench.data.errors import BenchInputError
-from metrics.camera import backproject
 from bench.data.synth import cameras as cams
 from bench.data.synth.geometry import SceneObject, _box
 from bench.data.synth.make import make_dataset, make_scene
 from bench.data.synth.recipe import load_recipe, parse_recipe
 from bench.data.synth.render import SceneRaycaster
+from metrics.camera import backproject
 
 REPO = Path(__file__).resolve().parents[2]
 SCENES = REPO / "configs" / "scenes"

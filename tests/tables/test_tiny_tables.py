@@ -9,7 +9,8 @@ import json
 import pytest
 
 from bench.cli import main
-from bench.pipeline import SHIPPED_TABLES as TABLES_DIR, plan_jobs
+from bench.pipeline import SHIPPED_TABLES as TABLES_DIR
+from bench.pipeline import plan_jobs
 from bench.runner import resolve_jobs
 from bench.table_spec import list_tables, load_table_spec
 

@@ -35,7 +35,7 @@ import numpy as np
 from bench.data.errors import BenchInputError
 from bench.data.formats import codec, extras
 from bench.data.formats.cameras import check_view_numbering, compose_world_mat, decompose_world_mat
-from bench.data.formats.npz import load_npy, load_npz, save_npz, save_npy
+from bench.data.formats.npz import load_npy, load_npz, save_npy, save_npz
 from bench.data.scene import Scene
 
 CAMERAS_FILE = "cameras.npz"

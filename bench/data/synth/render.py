@@ -12,9 +12,9 @@ from dataclasses import dataclass
 import numpy as np
 import open3d as o3d
 
-from metrics.camera import pixel_rays
 from bench.data.synth.geometry import SceneObject
 from bench.data.synth.shading import shade, texture_factor
+from metrics.camera import pixel_rays
 
 
 @dataclass
