@@ -26,7 +26,7 @@ from bench import __version__
 from bench.data.atomic import atomic_write_json
 from bench.data.datasets import DEFAULT_CACHE, scene_hash
 from bench.jobs import WORKER_LOST, Job, JobPlan, is_trained, result_path
-from methods.registry import available_methods, method_config
+from methods.registry import available_methods, identity_config, method_config
 
 if TYPE_CHECKING:
     from bench.executors.base import Executor
@@ -39,7 +39,7 @@ def job_id_for(plan: JobPlan, config: dict[str, Any], threads: int | None = None
     without it, the *base id* that tables and reports match results by."""
     key = {
         "method": plan.method,
-        "config": config,
+        "config": identity_config(plan.method, config),
         "scene": plan.scene,
         "recipe": scene_hash(plan.scene, plan.effects),
         "seed": plan.seed,

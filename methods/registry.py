@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+import json
 from pathlib import Path
 from typing import Any, Callable
 
@@ -112,6 +113,28 @@ def _read_config(name: str, config_dir: Path) -> tuple[Path, dict[str, Any], dic
         defaults = {**base_defaults, **defaults}
         scales = {k: {**base_scales.get(k, {}), **scales.get(k, {})} for k in set(base_scales) | set(scales)}
     return path, defaults, scales
+
+
+def _id_neutral(name: str, config_dir: Path) -> dict[str, Any]:
+    """The ``id_neutral:`` mapping of ``configs/methods/<name>.yaml`` (with its ``base:`` chain)."""
+    path = _PLUGIN_CONFIGS.get(name) or config_dir / f"{name}.yaml"
+    data = yaml.safe_load(path.read_text()) or {}
+    neutral = dict(data.get("id_neutral") or {})
+    if data.get("base"):
+        neutral = {**_id_neutral(str(data["base"]), config_dir), **neutral}
+    return neutral
+
+
+def identity_config(name: str, config: dict[str, Any], config_dir: Path = CONFIG_DIR) -> dict[str, Any]:
+    """The part of a resolved config that identifies a job (hashed into its id by ``bench.runner``).
+
+    A method's YAML may list ``id_neutral: {key: value}``: keys added after results were published whose
+    value there reproduces the code from before the key existed (e.g. ``use_grid: true``). At exactly that
+    value the key is left out of the identity, so published job rows keep matching their plans; at any
+    other value it is part of it. The full config is still what the method receives and what is stored."""
+    _load_plugins()
+    neutral = _id_neutral(name, config_dir)
+    return {k: v for k, v in config.items() if not (k in neutral and json.dumps(v) == json.dumps(neutral[k]))}
 
 
 def method_config(name: str, scale: str, overrides: dict[str, Any] | None = None, config_dir: Path = CONFIG_DIR) -> dict[str, Any]:

@@ -39,6 +39,7 @@ class MonoSDFConfig:
     # field and its initialisation
     inside_out: bool | Literal["auto"]
     init_radius: Annotated[float, Positive]
+    use_grid: bool
     grid_levels: Annotated[int, AtLeastOne]
     grid_features: Annotated[int, AtLeastOne]
     grid_log2_table: Annotated[int, Range(lo=4, hi=24)]
@@ -48,6 +49,8 @@ class MonoSDFConfig:
     grid_level_every: Annotated[float, NonNegative]
     mlp_hidden: Annotated[int, AtLeastOne]
     mlp_layers: Annotated[int, AtLeastOne]
+    mlp_skip: tuple[Annotated[int, AtLeastOne], ...]
+    weight_norm: bool
     geo_features: Annotated[int, AtLeastOne]
     color_hidden: Annotated[int, AtLeastOne]
     color_layers: Annotated[int, AtLeastOne]
@@ -91,6 +94,12 @@ class MonoSDFConfig:
             return f"grid_max_res ({self.grid_max_res}) must be >= grid_base_res ({self.grid_base_res})"
         if self.grid_levels_initial is not None and self.grid_levels_initial > self.grid_levels:
             return f"grid_levels_initial ({self.grid_levels_initial}) must be <= grid_levels ({self.grid_levels})"
+        pe_width = 3 * (1 + 2 * self.pe_frequencies)
+        for layer in self.mlp_skip:
+            if layer > self.mlp_layers:
+                return f"mlp_skip: layer {layer} is past the SDF MLP's last linear layer ({self.mlp_layers}; mlp_layers = {self.mlp_layers})"
+            if self.mlp_hidden <= pe_width:
+                return f"mlp_skip needs mlp_hidden ({self.mlp_hidden}) > the encoding's width {pe_width} (pe_frequencies = {self.pe_frequencies})"
         if list(self.fractions) != sorted(self.fractions) or not self.fractions:
             return f"fractions must be a non-empty increasing list in (0, 1], got {list(self.fractions)}"
         return None

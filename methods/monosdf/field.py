@@ -30,6 +30,7 @@ import torch.nn.functional as F
 from methods.monosdf.grid import FeatureGrid, GridSpec, _load_extension, fast_available, jacobian_contract
 
 SOFTPLUS_BETA = 100.0
+_INV_SQRT2 = 1.0 / math.sqrt(2.0)
 
 
 def softplus_and_slope_reference(z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -106,36 +107,64 @@ def linear_blocks(blocks: list[torch.Tensor], weight: torch.Tensor, bias: torch.
 class SDFNetwork(torch.nn.Module):
     """SDF field with analytic spatial gradient.
 
+    Two layouts of MonoSDF's ``ImplicitNetwork(Grid)``:
+
+    * grid variant (``spec`` given): input ``[grid features(x / R), PE(x / R)]``;
+    * MLP variant (``spec=None``, MonoSDF / the MonoInstance release ``use_grid_feature = False``): input
+      ``PE(x / R)`` alone, usually with a deeper MLP and ``skip`` (MonoSDF: 8 x 256, skip at layer 4).
+
+    ``skip`` lists linear layers ``l`` (0-based positions in ``self.linears``, >= 1) whose input is
+    ``[a_l, PE(x / R)] / sqrt(2)`` (IDR / MonoSDF ``skip_in``: the encoding re-enters the MLP; the layer
+    before it outputs ``hidden - PE width`` so that the concatenation is ``hidden`` wide). ``weight_norm``:
+    every SDF linear layer is weight-normalised (``torch.nn.utils.parametrizations.weight_norm``; MonoSDF:
+    ``weight_norm = True``), applied after the geometric init.
+
     Args:
-        spec: feature-grid layout. hidden: MLP width. layers: hidden layers. geo_features: size of the
-        geometry feature passed to the colour network. radius: bounding-sphere radius R (normalised
-        units). init_radius: geometric-init sphere radius. inside_out: rooms (cameras inside).
-        fast_grid: use the C++ kernels (grid, softplus and slope, positional encoding and its chain rule).
+        spec: feature-grid layout, or None for the MLP variant. hidden: MLP width. layers: hidden layers.
+        geo_features: size of the geometry feature passed to the colour network. radius: bounding-sphere
+        radius R (normalised units). init_radius: geometric-init sphere radius. inside_out: rooms (cameras
+        inside). fast_grid: use the C++ kernels (grid, softplus and slope, positional encoding and its
+        chain rule). pe_frequencies: positional-encoding frequencies. skip / weight_norm: above.
     """
 
-    def __init__(self, spec: GridSpec, hidden: int = 64, layers: int = 2, geo_features: int = 15, radius: float = 1.0,
+    def __init__(self, spec: GridSpec | None, hidden: int = 64, layers: int = 2, geo_features: int = 15, radius: float = 1.0,
                  init_radius: float = 0.6, inside_out: bool = True, fast_grid: bool = True, seed: int = 0,
-                 pe_frequencies: int = 0) -> None:
+                 pe_frequencies: int = 0, skip: tuple[int, ...] = (), weight_norm: bool = False) -> None:
         super().__init__()
         torch.manual_seed(seed)
-        self.grid = FeatureGrid(spec, fast=fast_grid, seed=seed)
+        self.grid = FeatureGrid(spec, fast=fast_grid, seed=seed) if spec is not None else None
+        self.fast = bool(fast_grid)
         self.radius = float(radius)
         self.pe_frequencies = int(pe_frequencies)
-        self.active_levels = spec.levels  # coarse-to-fine: features of finer levels read as 0 (set_active_levels)
+        self.active_levels = spec.levels if spec is not None else 0  # coarse-to-fine: finer levels read as 0 (set_active_levels)
         self.pe_freqs: torch.Tensor  # registered buffer (below): declared for the type checker
         self.register_buffer("pe_freqs", 2.0 ** torch.arange(self.pe_frequencies, dtype=torch.float32), persistent=False)
-        dims = [spec.out_dim + 3 * (1 + 2 * self.pe_frequencies)] + [hidden] * layers + [1 + geo_features]
-        self.linears = torch.nn.ModuleList(torch.nn.Linear(dims[i], dims[i + 1]) for i in range(len(dims) - 1))
-        self._geometric_init(spec.out_dim, init_radius, inside_out)
+        self.n_grid = spec.out_dim if spec is not None else 0
+        self.n_pe = 3 * (1 + 2 * self.pe_frequencies)
+        dims = [self.n_grid + self.n_pe] + [hidden] * layers + [1 + geo_features]
+        n_lin = len(dims) - 1
+        self.skip = tuple(sorted(int(s) for s in skip))
+        for s in self.skip:
+            if not 1 <= s < n_lin:
+                raise ValueError(f"skip layer {s} outside 1..{n_lin - 1} (the SDF MLP has {n_lin} linear layers)")
+            if dims[s] <= self.n_pe:
+                raise ValueError(f"skip at layer {s}: width {dims[s]} must exceed the encoding's {self.n_pe} inputs")
+        outs = [dims[i + 1] - (self.n_pe if i + 1 in self.skip else 0) for i in range(n_lin)]
+        self.linears = torch.nn.ModuleList(torch.nn.Linear(dims[i], outs[i]) for i in range(n_lin))
+        self._geometric_init(init_radius, inside_out)
+        if weight_norm:
+            for lin in self.linears:
+                torch.nn.utils.parametrizations.weight_norm(lin)
 
     def set_active_levels(self, n: int) -> None:
         """Use only the ``n`` coarsest grid levels (the others' features and Jacobians read as 0, so their
         table entries get no gradient): progressive level activation (Neuralangelo / instant-angelo)."""
-        self.active_levels = max(0, min(int(n), self.grid.spec.levels))
+        if self.grid is not None:
+            self.active_levels = max(0, min(int(n), self.grid.spec.levels))
 
     def level_mask(self, feat: torch.Tensor) -> torch.Tensor:
         """``feat`` (P, L * F) with the features of the inactive (finer) levels set to 0 (level-major layout)."""
-        if self.active_levels >= self.grid.spec.levels:
+        if self.grid is None or self.active_levels >= self.grid.spec.levels:
             return feat
         return feat * (torch.arange(feat.shape[-1]) < self.active_levels * self.grid.spec.features).to(feat.dtype)
 
@@ -143,7 +172,7 @@ class SDFNetwork(torch.nn.Module):
         """Positional encoding of ``u = x / R`` (P, 3) -> (P, 3 + 6F) ``[u, sin(f_k u), cos(f_k u)]`` with the
         k-major layout ``[sin k=0 xyz, ..., sin k=F-1 xyz, cos ...]`` (``u`` alone without frequencies).
         C++ kernel (``_encoding_kernel.cpp``) when the fast path is on; :meth:`encode_reference` is its twin."""
-        if self.pe_frequencies and self.grid.fast and u.dtype == torch.float32 and fast_available():
+        if self.pe_frequencies and self.fast and u.dtype == torch.float32 and fast_available():
             return _load_extension().pe_encode(u.contiguous(), self.pe_freqs)
         return self.encode_reference(u)
 
@@ -162,7 +191,7 @@ class SDFNetwork(torch.nn.Module):
         kernel when the fast path is on; :meth:`pe_chain_reference` is its twin."""
         if self.pe_frequencies == 0:
             return gin_pe
-        if self.grid.fast and gin_pe.dtype == torch.float32 and fast_available():
+        if self.fast and gin_pe.dtype == torch.float32 and fast_available():
             return _PEChain.apply(gin_pe, pe.detach(), self.pe_freqs)
         return self.pe_chain_reference(gin_pe, pe)
 
@@ -177,9 +206,10 @@ class SDFNetwork(torch.nn.Module):
         g_cos = gin_pe[:, 3 + 3 * F_ :].reshape(P, F_, 3)
         return gin_pe[:, :3] + ((g_sin * cos - g_cos * sin) * self.pe_freqs[None, :, None]).sum(1)
 
-    def _geometric_init(self, n_grid: int, r: float, inside_out: bool) -> None:
-        """IDR geometric init: a sphere SDF of radius r in normalised-by-R coordinates (grid features and
-        positional-encoding frequencies start with zero first-layer weights: the MLP sees only x)."""
+    def _geometric_init(self, r: float, inside_out: bool) -> None:
+        """IDR geometric init: a sphere SDF of radius r in normalised-by-R coordinates. Grid features and
+        positional-encoding frequencies start with zero weights (first layer, and the encoding's columns
+        of every skip layer): the MLP sees only x at init."""
         r_norm = r / self.radius
         for i, module in enumerate(self.linears):
             lin = cast(torch.nn.Linear, module)
@@ -192,8 +222,10 @@ class SDFNetwork(torch.nn.Module):
                 torch.nn.init.constant_(lin.bias, 0.0)
                 torch.nn.init.normal_(lin.weight, 0.0, math.sqrt(2) / math.sqrt(out_dim))
                 if i == 0:  # grid features and PE frequencies start switched off: the MLP sees only x at init
-                    torch.nn.init.constant_(lin.weight[:, :n_grid], 0.0)
-                    torch.nn.init.constant_(lin.weight[:, n_grid + 3 :], 0.0)
+                    torch.nn.init.constant_(lin.weight[:, : self.n_grid], 0.0)
+                    torch.nn.init.constant_(lin.weight[:, self.n_grid + 3 :], 0.0)
+                elif i in self.skip:  # the re-entering encoding's frequencies (IDR: weight[:, -(d_in - 3):] = 0)
+                    torch.nn.init.constant_(lin.weight[:, in_dim - self.n_pe + 3 :], 0.0)
 
     def forward(self, x: torch.Tensor, with_gradient: bool = True) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
         """Evaluate the field.
@@ -206,31 +238,50 @@ class SDFNetwork(torch.nn.Module):
             sdf (P,) in normalised units (clamped to the sphere), geometry feature (P, G), gradient (P, 3) or None.
         """
         xs = x / self.radius
-        feat, jac = self.grid(xs, with_jacobian=with_gradient)
-        feat = self.level_mask(feat)
-        jac = None if jac is None else self.level_mask(jac)  # (P, 3, L * F): the same mask on the last axis
         pe = self.encode(xs)  # (P, 3 + 6 F_pe)
-        first = cast(torch.nn.Linear, self.linears[0])
-        a, slope = _softplus_and_slope(linear_blocks([feat, pe], first.weight, first.bias), self.grid.fast)  # no (P, in) concatenation
+        blocks = [pe]
+        jac = None
+        if self.grid is not None:
+            feat, jac = self.grid(xs, with_jacobian=with_gradient)
+            feat = self.level_mask(feat)
+            jac = None if jac is None else self.level_mask(jac)  # (P, 3, L * F): the same mask on the last axis
+            blocks = [feat, pe]
+        n_lin = len(self.linears)
+        # each layer's weight read once (weight norm recomputes it on every read); a skip layer takes
+        # [a, pe] / sqrt(2), i.e. its weight / sqrt(2) on [a, pe]
+        ws = [cast(torch.Tensor, lin.weight) * _INV_SQRT2 if i in self.skip else cast(torch.Tensor, lin.weight) for i, lin in enumerate(self.linears)]
+        bs = [cast(torch.Tensor, lin.bias) for lin in self.linears]
+        a, slope = _softplus_and_slope(linear_blocks(blocks, ws[0], bs[0]), self.fast)  # no (P, in) concatenation
         slopes = [slope]
-        for lin in self.linears[1:-1]:
-            a, slope = _softplus_and_slope(lin(a), self.grid.fast)
+        for i in range(1, n_lin - 1):
+            z = linear_blocks([a, pe], ws[i], bs[i]) if i in self.skip else torch.addmm(bs[i], a, ws[i].t())
+            a, slope = _softplus_and_slope(z, self.fast)
             slopes.append(slope)
-        out = self.linears[-1](a)
+        out = linear_blocks([a, pe], ws[-1], bs[-1]) if n_lin - 1 in self.skip else torch.addmm(bs[-1], a, ws[-1].t())
         sdf_net = out[:, 0] * self.radius  # the MLP works in x / R units; the SDF in normalised units
         geo = out[:, 1:]
         grad = None
         if with_gradient:
-            # explicit vector-Jacobian product of the SDF output (differentiable, first-order ops only)
-            g = cast(torch.nn.Linear, self.linears[-1]).weight[0].expand_as(slopes[-1])
-            for lin, slope in zip(reversed(self.linears[1:-1]), reversed(slopes[1:])):
-                g = (g * slope) @ cast(torch.Tensor, lin.weight)  # (P, in)
+            # explicit vector-Jacobian product of the SDF output (differentiable, first-order ops only):
+            # g = d sdf / d (input of layer i), walked from the last layer to the first; the encoding's
+            # share of every skip layer's input gradient is collected in g_pe
+            g = ws[-1][0].expand(a.shape[0], ws[-1].shape[1])
+            g_pe: torch.Tensor | None = None
+            for i in range(n_lin - 1, 0, -1):
+                if i in self.skip:
+                    h = ws[i].shape[1] - self.n_pe
+                    g_pe = g[:, h:] if g_pe is None else g_pe + g[:, h:]
+                    g = g[:, :h]
+                if i > 1:
+                    g = (g * slopes[i - 1]) @ ws[i - 1]  # (P, in of layer i - 1)
             g0 = g * slopes[0]  # (P, H): d sdf / d (first layer pre-activation)
-            w0 = cast(torch.nn.Linear, self.linears[0]).weight  # (H, L * F + 3 + 6 F_pe)
-            assert jac is not None  # the grid returns the Jacobian when asked (with_jacobian=with_gradient)
-            c = jac.shape[-1]
-            # one product per input block (grid / encoding), then each block's own chain rule
-            grad = jacobian_contract(jac, g0 @ w0[:, :c], self.grid.fast) + self.pe_chain(g0 @ w0[:, c:], pe)  # (P, 3); 1/R and x R cancel
+            c = self.n_grid
+            # one product per input block of the first layer (grid / encoding), then each block's own chain rule
+            gin_pe = g0 @ ws[0][:, c:]
+            grad = self.pe_chain(gin_pe if g_pe is None else gin_pe + g_pe, pe)  # (P, 3); 1/R and x R cancel
+            if self.grid is not None:
+                assert jac is not None  # the grid returns the Jacobian when asked (with_jacobian=with_gradient)
+                grad = jacobian_contract(jac, g0 @ ws[0][:, :c], self.fast) + grad
         # bounding-sphere clamp (MonoSDF): every ray terminates inside the sphere
         norm = x.norm(dim=-1)
         sphere = self.radius - norm
@@ -251,12 +302,16 @@ def sdf_gradient_autograd(net: SDFNetwork, x: torch.Tensor, create_graph: bool =
 
     x = x.detach().requires_grad_(True)
     xs = x / net.radius
-    feat, _ = interpolate_reference(net.grid.table, xs, net.grid.spec, with_jacobian=False)
-    feat = net.level_mask(feat)
-    a = torch.cat([feat, net.encode_reference(xs)], dim=-1)
-    for lin in net.linears[:-1]:
-        a = F.softplus(lin(a), beta=SOFTPLUS_BETA)
-    sdf = torch.minimum(net.linears[-1](a)[:, 0] * net.radius, net.radius - x.norm(dim=-1))
+    pe = net.encode_reference(xs)
+    a = pe
+    if net.grid is not None:
+        feat, _ = interpolate_reference(net.grid.table, xs, net.grid.spec, with_jacobian=False)
+        a = torch.cat([net.level_mask(feat), pe], dim=-1)
+    for i, lin in enumerate(net.linears):
+        if i in net.skip:
+            a = torch.cat([a, pe], dim=-1) / math.sqrt(2)
+        a = lin(a) if i == len(net.linears) - 1 else F.softplus(lin(a), beta=SOFTPLUS_BETA)
+    sdf = torch.minimum(a[:, 0] * net.radius, net.radius - x.norm(dim=-1))
     return torch.autograd.grad(sdf.sum(), x, create_graph=create_graph)[0]
 
 

@@ -94,10 +94,11 @@ class MonoSDFTrainer:
         self.extra_losses: list[Callable[..., dict[str, tuple[float, torch.Tensor]]]] = []
         self.diagnostic_sources: list[Callable[[], dict[str, float]]] = []  # their numbers join diagnostics() (MonoInstance's mask term)
 
-        spec = make_grid_spec(cfg.grid_levels, cfg.grid_features, cfg.grid_log2_table, cfg.grid_base_res, cfg.grid_max_res)
+        spec = make_grid_spec(cfg.grid_levels, cfg.grid_features, cfg.grid_log2_table, cfg.grid_base_res, cfg.grid_max_res) if cfg.use_grid else None
         self.sdf = SDFNetwork(spec, hidden=cfg.mlp_hidden, layers=cfg.mlp_layers, geo_features=cfg.geo_features,
                               radius=self.radius, init_radius=cfg.init_radius, inside_out=resolve_inside_out(cfg.inside_out, scene),
-                              fast_grid=cfg.fast_grid, seed=seed, pe_frequencies=int(cfg.pe_frequencies))
+                              fast_grid=cfg.fast_grid, seed=seed, pe_frequencies=int(cfg.pe_frequencies),
+                              skip=tuple(cfg.mlp_skip), weight_norm=cfg.weight_norm)
         self.color = ColorNetwork(cfg.geo_features, cfg.color_hidden, cfg.color_layers,
                                   appearance_dim=int(cfg.appearance_dim), num_images=V)
         self.density = LaplaceDensity(cfg.beta_init, cfg.beta_min)
@@ -106,7 +107,7 @@ class MonoSDFTrainer:
         # three groups as MonoSDF's optimiser (encoding x grid_lr_factor, networks, density); the density
         # (beta) group at lr x beta_lr_factor (MonoSDF: 1)
         self.optim = torch.optim.Adam([
-            {"params": [self.sdf.grid.table], "lr": lr * cfg.grid_lr_factor},
+            {"params": [self.sdf.grid.table] if self.sdf.grid is not None else [], "lr": lr * cfg.grid_lr_factor},
             {"params": mlp_params + list(self.color.parameters()), "lr": lr},
             {"params": list(self.density.parameters()), "lr": lr * float(cfg.beta_lr_factor)},
         ], betas=(0.9, 0.99), eps=1e-15, fused=True)

@@ -110,6 +110,57 @@ def test_explicit_sdf_gradient_backpropagates_like_double_backward(fast, pe):
         torch.testing.assert_close(got, want, atol=1e-3, rtol=1e-3)  # the C++ kernels are float32 -ffast-math
 
 
+@pytest.mark.parametrize("fast,skip,weight_norm", [(True, (2,), False), (False, (2,), True), (True, (1, 3), True), (True, (), False)])
+def test_mlp_variant_gradient_and_its_backward_match_autograd(fast, skip, weight_norm):
+    """MonoSDF's MLP variant (no grid: PE alone, skip layers re-concatenating the encoding / sqrt(2),
+    weight norm): the explicit gradient equals autograd through the slow twin (which concatenates
+    literally, as MonoSDF's ``ImplicitNetwork``), and so do the parameter gradients of a loss on it."""
+    net = SDFNetwork(None, hidden=48, layers=4, geo_features=4, radius=1.0, fast_grid=fast, seed=0, pe_frequencies=6,
+                     skip=skip, weight_norm=weight_norm)
+    assert net.grid is None and not any(n.startswith("grid.") for n, _ in net.named_parameters())
+    with torch.no_grad():
+        for p in net.parameters():
+            p.add_(torch.randn_like(p) * 0.2)
+    x = (torch.rand(300, 3) * 2 - 1) * 0.7
+    sdf, geo, grad = net(x)
+    assert sdf.shape == (300,) and geo.shape == (300, 4) and torch.isfinite(grad).all()
+    torch.testing.assert_close(grad, sdf_gradient_autograd(net, x), atol=1e-3, rtol=1e-3)
+    target = torch.nn.functional.normalize(torch.randn(300, 3), dim=-1)
+
+    def loss_of(g: torch.Tensor) -> torch.Tensor:
+        return ((g.norm(dim=-1) - 1) ** 2).mean() + (g * target).sum(-1).mean()
+
+    params = list(net.parameters())
+    explicit = torch.autograd.grad(loss_of(net(x)[2]), params, allow_unused=True)
+    reference = torch.autograd.grad(loss_of(sdf_gradient_autograd(net, x, create_graph=True)), params, allow_unused=True)
+    for got, want in zip(explicit, reference):
+        if want is None:
+            assert got is None or float(got.abs().max()) == 0.0
+            continue
+        # float32 through 5 layers (in float64 the two agree to 1e-9 relative): tolerance scaled to the tensor
+        torch.testing.assert_close(got, want, atol=2e-3 * float(want.abs().max()), rtol=1e-3)
+
+
+@pytest.mark.parametrize("skip,weight_norm", [((), False), ((2,), True)])
+def test_mlp_variant_geometric_init_is_a_sphere(skip, weight_norm):
+    """IDR geometric init with the encoding's frequencies switched off in the first and every skip layer:
+    the MLP variant starts as a sphere SDF of radius init_radius (inside_out: positive inside)."""
+    net = SDFNetwork(None, hidden=128, layers=4, geo_features=4, radius=1.0, init_radius=0.6, inside_out=True, pe_frequencies=6,
+                     skip=skip, weight_norm=weight_norm)
+    d = torch.nn.functional.normalize(torch.randn(400, 3), dim=-1)
+    sdf, _, grad = net(d * 0.3)  # IDR's init is a sphere only roughly (as the grid variant's: test below)
+    assert abs(float(sdf.mean()) - (0.6 - 0.3)) < 0.1 and float(sdf.min()) > 0.0
+    assert float(torch.nn.functional.cosine_similarity(grad, -d).mean()) > 0.9  # inside-out: the SDF falls outward
+    assert float(net(d * 0.6)[0].mean()) < float(sdf.mean()) and float(net(d * 0.85)[0].mean()) < 0.1
+
+
+def test_mlp_variant_rejects_a_skip_it_cannot_build():
+    with pytest.raises(ValueError, match="skip"):
+        SDFNetwork(None, hidden=32, layers=4, pe_frequencies=6, skip=(2,))  # 32 <= the encoding's 39 inputs
+    with pytest.raises(ValueError, match="skip"):
+        SDFNetwork(None, hidden=64, layers=2, pe_frequencies=6, skip=(3,))  # 3 linear layers: 1..2
+
+
 @pytest.mark.skipif(not fast_available(), reason="no C++ compiler")
 def test_encoding_kernels_match_reference_values_and_gradient():
     """The C++ positional encoding and its gradient chain against their PyTorch twins (values, and the
