@@ -124,3 +124,27 @@ def test_bench_config_prints_the_checked_config_and_rejects_bad_overrides(capsys
     assert main(["config", "monosdf", "--set", "lr=fast"]) == 2
     assert "config key 'lr' must be a number in (0, inf) (got 'fast')" in capsys.readouterr().err
     assert main(["config", "monosdf", "--set", "lr_typo=1"]) == 2  # not a key of the method
+
+
+def test_id_neutral_keys_leave_job_ids_alone_only_at_their_neutral_value():
+    """Keys added after results were published (``id_neutral`` in a method's YAML) are left out of the
+    job identity at their neutral value (so published rows keep matching) and are part of it otherwise;
+    inherited by ``base:`` variants (monoinstance from monosdf)."""
+    from methods.registry import identity_config, method_config
+
+    for name in ("monosdf", "monoinstance"):
+        default = method_config(name, "tiny")
+        ident = identity_config(name, default)
+        assert "use_grid" in default and "use_grid" not in ident and "mlp_skip" not in ident
+        assert "iterations" in ident
+        mlp = identity_config(name, method_config(name, "tiny", {"use_grid": False, "mlp_skip": [2], "mlp_hidden": 64}))
+        assert mlp["use_grid"] is False and mlp["mlp_skip"] == [2] and "weight_norm" not in mlp
+
+
+def test_mlp_skip_that_cannot_be_built_is_one_config_error():
+    from methods.registry import method_config
+
+    with pytest.raises(BenchInputError, match="mlp_skip"):
+        method_config("monosdf", "tiny", {"use_grid": False, "mlp_layers": 4, "mlp_skip": [5], "mlp_hidden": 64})
+    with pytest.raises(BenchInputError, match="mlp_skip"):
+        method_config("monosdf", "tiny", {"use_grid": False, "mlp_layers": 4, "mlp_skip": [2], "mlp_hidden": 32})
