@@ -5,7 +5,7 @@ from __future__ import annotations
 import importlib
 import json
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, NamedTuple
 
 import yaml
 
@@ -98,9 +98,17 @@ def config_type(name: str) -> type | None:
     return getattr(_REGISTRY[name], "config_type", None)
 
 
-def _read_config(name: str, config_dir: Path) -> tuple[Path, dict[str, Any], dict[str, Any]]:
-    """(path, defaults, scales) of ``configs/methods/<name>.yaml`` (a plugin's own ``config_path``), with
-    ``base:`` inheritance resolved."""
+class _MethodYaml(NamedTuple):
+    """A method's YAML config with ``base:`` inheritance resolved."""
+
+    path: Path
+    defaults: dict[str, Any]
+    scales: dict[str, dict[str, Any]]
+    id_neutral: dict[str, Any]  # keys left out of job ids at these values (:func:`identity_config`)
+
+
+def _read_config(name: str, config_dir: Path) -> _MethodYaml:
+    """``configs/methods/<name>.yaml`` (a plugin's own ``config_path``), with ``base:`` inheritance resolved."""
     _load_plugins()
     path = _PLUGIN_CONFIGS.get(name) or config_dir / f"{name}.yaml"
     if not path.exists():
@@ -108,21 +116,13 @@ def _read_config(name: str, config_dir: Path) -> tuple[Path, dict[str, Any], dic
     data = yaml.safe_load(path.read_text()) or {}
     defaults = dict(data.get("defaults") or {})
     scales = {k: dict(v or {}) for k, v in (data.get("scales") or {}).items()}
-    if data.get("base"):
-        _, base_defaults, base_scales = _read_config(str(data["base"]), config_dir)
-        defaults = {**base_defaults, **defaults}
-        scales = {k: {**base_scales.get(k, {}), **scales.get(k, {})} for k in set(base_scales) | set(scales)}
-    return path, defaults, scales
-
-
-def _id_neutral(name: str, config_dir: Path) -> dict[str, Any]:
-    """The ``id_neutral:`` mapping of ``configs/methods/<name>.yaml`` (with its ``base:`` chain)."""
-    path = _PLUGIN_CONFIGS.get(name) or config_dir / f"{name}.yaml"
-    data = yaml.safe_load(path.read_text()) or {}
     neutral = dict(data.get("id_neutral") or {})
     if data.get("base"):
-        neutral = {**_id_neutral(str(data["base"]), config_dir), **neutral}
-    return neutral
+        base = _read_config(str(data["base"]), config_dir)
+        defaults = {**base.defaults, **defaults}
+        scales = {k: {**base.scales.get(k, {}), **scales.get(k, {})} for k in set(base.scales) | set(scales)}
+        neutral = {**base.id_neutral, **neutral}
+    return _MethodYaml(path, defaults, scales, neutral)
 
 
 def identity_config(name: str, config: dict[str, Any], config_dir: Path = CONFIG_DIR) -> dict[str, Any]:
@@ -132,8 +132,7 @@ def identity_config(name: str, config: dict[str, Any], config_dir: Path = CONFIG
     value there reproduces the code from before the key existed (e.g. ``use_grid: true``). At exactly that
     value the key is left out of the identity, so published job rows keep matching their plans; at any
     other value it is part of it. The full config is still what the method receives and what is stored."""
-    _load_plugins()
-    neutral = _id_neutral(name, config_dir)
+    neutral = _read_config(name, config_dir).id_neutral
     return {k: v for k, v in config.items() if not (k in neutral and json.dumps(v) == json.dumps(neutral[k]))}
 
 
@@ -150,7 +149,7 @@ def method_config(name: str, scale: str, overrides: dict[str, Any] | None = None
     Returns the resolved mapping (JSON-serialisable: it is hashed into the job id and stored with the
     result); :func:`typed_method_config` gives the typed object.
     """
-    path, defaults, scales = _read_config(name, config_dir)
+    path, defaults, scales, _ = _read_config(name, config_dir)
     if scale not in scales:
         raise BenchInputError(path, f"no preset for scale {scale!r} (has {sorted(scales)})")
     cfg = {**defaults, **scales[scale]}
