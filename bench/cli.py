@@ -11,7 +11,7 @@
     bench report [--out DIR]                     rebuild every table from stored results
     bench fit METHOD PATH [--scale S] [--set K=V] [--out DIR]
                                                  one method on your own dataset folder; metrics where GT exists
-    bench study convergence METHOD SCENE [--seeds 0 1 2] [--snapshots 8] [--exact-priors]
+    bench study convergence METHOD SCENE [--seeds 0 1 2] [--snapshots 8] [--exact-priors [depth|normal]]
               [--set KEY=VALUE ...] [--sweep KEY=V1,V2] [--out DIR]
                                                  F-score / depth error / beta / losses along the schedule
 
@@ -370,7 +370,10 @@ def build_parser() -> argparse.ArgumentParser:
     conv.add_argument("--scale", default="small", choices=SCALES)
     conv.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     conv.add_argument("--snapshots", type=int, default=8, help="evenly spaced snapshots along the schedule")
-    conv.add_argument("--exact-priors", action="store_true", help="GT depth and GT normals as the priors (the ceiling they allow)")
+    conv.add_argument("--exact-priors", nargs="?", const="both", default="none", choices=["both", "depth", "normal"],
+                      metavar="{both,depth,normal}",
+                      help="GT depth and GT normals as the priors (the ceiling they allow); 'depth' / 'normal': only that "
+                           "one exact, the scene's other prior kept (which of the two a failure comes from)")
     conv.add_argument("--set", nargs="+", default=None, metavar="KEY=VALUE", help="config overrides (YAML values)")
     conv.add_argument("--sweep", default=None, metavar="KEY=V1,V2,...", help="repeat the study for each value of one config key")
     conv.add_argument("--workers", type=int, default=None, help="parallel runs (default: one single-threaded run per core)")

@@ -5,7 +5,8 @@
 scene protocol's metrics (F-score, accuracy, completion, ...), the method's own diagnostics (MonoSDF:
 beta, every loss term averaged since the previous snapshot, the median rendered-depth error against GT
 on training views) and the seconds spent. ``--exact-priors`` replaces the scene's monocular priors by its
-GT depth and GT normals (the ceiling the priors allow). ``--sweep KEY=V1,V2,...`` repeats the study for
+GT depth and GT normals (the ceiling the priors allow; ``--exact-priors depth`` / ``normal`` replaces one of
+the two and keeps the scene's other prior). ``--sweep KEY=V1,V2,...`` repeats the study for
 each value of one config key. Writes ``study.csv`` (tidy: one line per run x snapshot),
 ``study.png`` (curves, mean over seeds, one colour per value) and ``study.md`` (final values and the
 convergence checks of the issue tracker's criteria: F at 50 % within ``flat_tol`` of F at 100 %, no
@@ -44,7 +45,7 @@ class StudyRun:
     scale: str
     seed: int
     overrides: dict[str, Any]
-    exact_priors: bool
+    exact_priors: str  # which priors are replaced by GT: "none" | "both" | "depth" | "normal" (EXACT_PRIORS)
     sweep_value: Any = None
     sweep_key: str | None = None
     mesh_dir: str | None = None  # every snapshot's mesh is written here (world metres, PLY; _write_meshes)
@@ -93,17 +94,33 @@ def parse_sweep(text: str | None) -> tuple[str | None, list[Any]]:
     return key.strip(), values
 
 
-def load_study_scene(scene: str, scale: str, exact_priors: bool) -> Any:
+EXACT_PRIORS = ("none", "both", "depth", "normal")
+
+
+def exact_priors_choice(value: bool | str) -> str:
+    """``--exact-priors`` as one of :data:`EXACT_PRIORS` (``True`` = ``"both"``, ``False`` = ``"none"``)."""
+    choice = {True: "both", False: "none"}.get(value, value) if isinstance(value, bool) else str(value)
+    if choice not in EXACT_PRIORS:
+        raise ValueError(f"exact priors must be one of {EXACT_PRIORS}, got {value!r}")
+    return choice
+
+
+def load_study_scene(scene: str, scale: str, exact_priors: bool | str) -> Any:
     """The scene of a study: a recipe name (synthesised and cached) or a dataset folder; with
-    ``exact_priors`` its mono depth / normals are replaced by GT depth / GT normals (camera frame)."""
+    ``exact_priors`` its mono depth and / or normals are replaced by GT depth / GT normals (camera frame):
+    ``"both"`` (or ``True``) is the ceiling the priors allow; ``"depth"`` / ``"normal"`` replace one and keep
+    the scene's other prior, which tells which of the two a failure comes from."""
     from bench.data.datasets import load_dataset
     from bench.data.formats import load_scene
 
+    which = exact_priors_choice(exact_priors)
     sc = load_scene(Path(scene)) if Path(scene).is_dir() else load_dataset(scene, scale)
-    if exact_priors:
+    if which != "none":
         if sc.gt_depth is None or sc.gt_normal is None:
             raise BenchInputError(sc.root or scene, "--exact-priors needs GT depth and GT normals in the dataset")
-        sc = dataclasses.replace(sc, mono_depth=sc.gt_depth.copy(), mono_normal=sc.gt_normal.copy())
+        exact = {"mono_depth": sc.gt_depth.copy(), "mono_normal": sc.gt_normal.copy()}
+        keep = {"both": (), "depth": ("mono_normal",), "normal": ("mono_depth",)}[which]
+        sc = dataclasses.replace(sc, **{k: v for k, v in exact.items() if k not in keep})
     return sc
 
 
@@ -246,7 +263,7 @@ def plot_study(df: pd.DataFrame, title: str) -> bytes:
 
 
 def run_study(method: str, scene: str, scale: str, seeds: list[int], overrides: dict[str, Any], sweep: str | None,
-              exact_priors: bool, snapshots: int, out_dir: Path, workers: int | None = None,
+              exact_priors: bool | str, snapshots: int, out_dir: Path, workers: int | None = None,
               log: Callable[[str], None] = print, stop_at: float = 1.0) -> pd.DataFrame:
     """Run every (sweep value x seed), write study.csv / study.png / study.md into ``out_dir``; returns the
     records. ``stop_at`` < 1: every run stops at that fraction of its schedule (see :func:`run_one`)."""
@@ -258,16 +275,18 @@ def run_study(method: str, scene: str, scale: str, seeds: list[int], overrides: 
         raise BenchInputError("--stop-at", f"must lie in [1 / snapshots, 1] = [{1.0 / snapshots:g}, 1], got {stop_at:g}")
     key, values = parse_sweep(sweep)
     method_config(method, scale, {**overrides, **({key: values[0]} if key else {})})  # unknown keys: one clear error, before any work
+    exact_priors = exact_priors_choice(exact_priors)
     load_study_scene(scene, scale, exact_priors)  # bad scene: fail now (and synthesise it once, before the workers)
     mesh_dir = str(Path(out_dir) / "meshes")
     runs = [StudyRun(method, scene, scale, int(s), {**overrides, **({key: v} if key else {})}, exact_priors, v, key, mesh_dir)
             for v in values for s in seeds]
     workers = max(1, min(workers or os.cpu_count() or 1, len(runs)))
-    log(f"[study] {method} on {scene} ({scale}{', exact priors' if exact_priors else ''}): {len(runs)} runs "
+    exact_label = {"none": "", "both": ", exact priors", "depth": ", exact depth prior", "normal": ", exact normal prior"}[exact_priors]
+    log(f"[study] {method} on {scene} ({scale}{exact_label}): {len(runs)} runs "
         f"({len(values)} value(s) x {len(seeds)} seed(s)), {snapshots} snapshots each, {workers} worker(s)")
     records: list[dict[str, Any]] = []
     t0 = time.perf_counter()
-    title = f"{method} on {scene} ({scale}){' exact priors' if exact_priors else ''}; {overrides or ''}"
+    title = f"{method} on {scene} ({scale}{exact_label}); {overrides or ''}"
     out_dir = Path(out_dir)
     df = pd.DataFrame()
     from bench.executors.lifeline import FORKSERVER_PRELOAD, mark_parent

@@ -6,7 +6,7 @@ import pandas as pd
 import pytest
 
 from bench.cli import main
-from bench.study import convergence_checks, parse_sweep
+from bench.study import convergence_checks, exact_priors_choice, load_study_scene, parse_sweep
 
 
 def test_convergence_checks_follow_the_issue_criteria():
@@ -17,6 +17,21 @@ def test_convergence_checks_follow_the_issue_criteria():
     swinging = pd.DataFrame({"fraction": [0.25, 0.5, 0.75, 1.0], "fscore": [0.7, 0.8, 0.7, 0.8]})
     c = convergence_checks(swinging)
     assert c["flat"] and not c["no_drop"] and c["max_drop"] == pytest.approx(0.1)
+
+
+def test_exact_priors_replace_the_chosen_prior_only():
+    import numpy as np
+
+    shipped = load_study_scene("scannet_like_tiny", "tiny", "none")
+    assert not np.array_equal(shipped.mono_depth, shipped.gt_depth)  # the shipped prior is not exact: the test can fail
+    assert not np.array_equal(shipped.mono_normal, shipped.gt_normal)
+    for which, depth_exact, normal_exact in [("both", True, True), (True, True, True), ("depth", True, False),
+                                             ("normal", False, True), (False, False, False)]:
+        sc = load_study_scene("scannet_like_tiny", "tiny", which)
+        assert np.array_equal(sc.mono_depth, sc.gt_depth if depth_exact else shipped.mono_depth), which
+        assert np.array_equal(sc.mono_normal, sc.gt_normal if normal_exact else shipped.mono_normal), which
+    with pytest.raises(ValueError, match="exact priors must be one of"):
+        exact_priors_choice("colour")
 
 
 def test_parse_sweep():
