@@ -1,4 +1,5 @@
-"""Is a scene's monocular depth prior biased per object once it is aligned to GT? (issue 14)
+"""Is a scene's monocular depth prior biased per object once it is aligned to GT, and do its normals
+face the camera more or less than the GT normals? (issue 14)
 
 For every view, align the mono depth prior to the GT depth with an affine map and report, per GT object,
 the median ratio aligned prior / GT depth over all views (< 1: the aligned prior puts the object closer to
@@ -11,6 +12,11 @@ the camera than it is). Two alignments:
 * ``gt_to_prior_inverted``: least squares ``prior ~ c GT + d``, then ``(prior - d) / c``: GT is the
   regressor, no attenuation; what remains are the prior's own biases (thin parts pulled to the
   background, bleeding at occlusion edges).
+
+Normals: ``normal_facing_bias_deg``, the median over the object's pixels of (angle between the prior
+normal and the direction to the camera) - (the same angle of the GT normal): < 0 means the prior's
+surface faces the camera more than it does (e.g. a floor seen at a grazing angle tilted towards the
+camera, as a depth compressed towards its mean gives).
 
 Usage:
     .venv/bin/python scripts/prior_bias_by_object.py (RECIPE_NAME | DATASET_DIR) [--scale small]
@@ -40,6 +46,17 @@ def aligned_ratios(prior: np.ndarray, gt: np.ndarray) -> dict[str, np.ndarray]:
     return {k: np.where(valid, v, np.nan) for k, v in out.items()}
 
 
+def facing_angle_deg(normals: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """(H, W) angle (degrees) between camera-frame unit normals (H, W, 3) and the direction from each
+    pixel's surface point back to the camera (OpenCV axes, z forward)."""
+    from metrics.camera import pixel_rays
+
+    h, w = normals.shape[:2]
+    rays = pixel_rays(K, h, w)
+    rays = rays / np.linalg.norm(rays, axis=-1, keepdims=True)
+    return np.degrees(np.arccos(np.clip(-(normals * rays).sum(-1), -1.0, 1.0)))
+
+
 def main() -> None:
     import pandas as pd
 
@@ -56,16 +73,25 @@ def main() -> None:
     per_object: dict[tuple[str, str], list[np.ndarray]] = {}
     for v in range(scene.num_views):
         inst = scene.gt_instance[v]
+        if scene.mono_normal is not None and scene.gt_normal is not None:
+            K = np.asarray(scene.intrinsics[v], dtype=np.float64)
+            has = (np.linalg.norm(scene.mono_normal[v], axis=-1) > 0.5) & (np.linalg.norm(scene.gt_normal[v], axis=-1) > 0.5)
+            bias = np.where(has, facing_angle_deg(scene.mono_normal[v].astype(np.float64), K)
+                            - facing_angle_deg(scene.gt_normal[v].astype(np.float64), K), np.nan)
+            for iid in np.unique(inst[has]):
+                info = scene.instances.get(int(iid))
+                per_object.setdefault((info.name if info else str(iid), "normal_facing_bias_deg"), []).append(bias[has & (inst == iid)])
         for align, ratio in aligned_ratios(scene.mono_depth[v].astype(np.float64), scene.gt_depth[v].astype(np.float64)).items():
             ok = np.isfinite(ratio)
             for iid in np.unique(inst[ok]):
                 info = scene.instances.get(int(iid))
                 per_object.setdefault((info.name if info else str(iid), align), []).append(ratio[ok & (inst == iid)])
-    rows = [{"object": obj, "align": align, "pixels": int(sum(r.size for r in rs)), "median_ratio": float(np.median(np.concatenate(rs)))}
-            for (obj, align), rs in per_object.items()]
-    df = pd.DataFrame(rows).pivot(index="object", columns="align", values="median_ratio")
-    df["pixels"] = pd.DataFrame(rows).groupby("object")["pixels"].first()
-    print(f"{args.scene}: median (aligned prior / GT depth) per GT object over {scene.num_views} views")
+    rows = [{"object": obj, "column": col, "pixels": int(sum(r.size for r in rs)), "median": float(np.median(np.concatenate(rs)))}
+            for (obj, col), rs in per_object.items()]
+    df = pd.DataFrame(rows).pivot(index="object", columns="column", values="median")
+    df["pixels"] = pd.DataFrame(rows).query("column == 'prior_to_gt'").set_index("object")["pixels"]
+    print(f"{args.scene}: per GT object over {scene.num_views} views, median (aligned prior / GT depth) under both "
+          "alignments and the normal prior's facing bias (degrees)")
     print(df.sort_values("pixels", ascending=False).to_string(float_format=lambda x: f"{x:.3f}"))
 
 

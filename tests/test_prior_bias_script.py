@@ -37,3 +37,16 @@ def test_prior_noise_compresses_the_prior_to_gt_fit_only():
     # with GT as the regressor there is no attenuation
     assert abs(np.median(r["gt_to_prior_inverted"][far]) - 1.0) < 0.02
     assert abs(np.median(r["gt_to_prior_inverted"][near]) - 1.0) < 0.05
+
+
+def test_facing_angle_of_a_fronto_parallel_and_a_tilted_plane():
+    K = np.array([[50.0, 0.0, 10.0], [0.0, 50.0, 10.0], [0.0, 0.0, 1.0]])
+    facing = np.zeros((21, 21, 3))
+    facing[..., 2] = -1.0  # normal towards the camera (OpenCV: z forward)
+    a = _script().facing_angle_deg(facing, K)
+    assert a[10, 10] == 0.0  # the principal point looks straight at it
+    assert 0.0 < a[0, 0] < 20.0  # off-axis pixels see it at the ray's angle (atan(sqrt(2) 10 / 50) = 15.8 deg)
+    np.testing.assert_allclose(a[0, 0], np.degrees(np.arctan(np.sqrt(2.0) * 10.0 / 50.0)), atol=1e-9)
+    up = np.zeros((21, 21, 3))
+    up[..., 1] = -1.0  # a floor's normal (y down in OpenCV): seen edge-on from the principal point
+    np.testing.assert_allclose(_script().facing_angle_deg(up, K)[10, 10], 90.0, atol=1e-9)
