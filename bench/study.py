@@ -99,7 +99,7 @@ EXACT_PRIORS = ("none", "both", "depth", "normal")
 
 def exact_priors_choice(value: bool | str) -> str:
     """``--exact-priors`` as one of :data:`EXACT_PRIORS` (``True`` = ``"both"``, ``False`` = ``"none"``)."""
-    choice = {True: "both", False: "none"}.get(value, value) if isinstance(value, bool) else str(value)
+    choice = ("both" if value else "none") if isinstance(value, bool) else str(value)
     if choice not in EXACT_PRIORS:
         raise ValueError(f"exact priors must be one of {EXACT_PRIORS}, got {value!r}")
     return choice
