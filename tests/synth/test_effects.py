@@ -355,6 +355,23 @@ def test_normals_follow_depth_errors_and_ignore_shift_when_aligned(scene):
         assert cos(scene).min() < 0.999  # a warp bends it
 
 
+def test_normal_alignment_directions():
+    """``align_fit``: both least-squares directions recover an exact affine prior; with errors in the prior
+    only ``prior_to_gt`` (the prior as the regressor) compresses the depth range (regression dilution)."""
+    from bench.data.synth.effects.normals import _align_scale_shift
+
+    gen = np.random.default_rng(0)
+    gt = gen.uniform(1.0, 5.0, (64, 64))
+    for fit in ("prior_to_gt", "gt_to_prior"):
+        np.testing.assert_allclose(_align_scale_shift(0.7 * gt + 0.4, gt, fit), gt, rtol=1e-9)
+    noisy = 0.7 * gt + 0.4 + gen.normal(0.0, 0.5, gt.shape)
+    spread = {fit: np.polyfit(gt.ravel(), _align_scale_shift(noisy, gt, fit).ravel(), 1)[0] for fit in ("prior_to_gt", "gt_to_prior")}
+    assert spread["prior_to_gt"] < 0.9  # slope of aligned vs GT: compressed
+    assert abs(spread["gt_to_prior"] - 1.0) < 0.05
+    with pytest.raises(ValueError, match="fit must be"):
+        _align_scale_shift(noisy, gt, "both")
+
+
 def test_normal_blend_and_smoothing_keep_unit_length(scene):
     apply_effects(
         scene,

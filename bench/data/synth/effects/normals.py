@@ -84,13 +84,26 @@ def _orient_and_mask(n: np.ndarray, dirs: np.ndarray, valid: np.ndarray) -> np.n
     return np.where(valid[..., None], n, 0.0)
 
 
-def _align_scale_shift(pred: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """Least-squares ``s pred + t ~ target`` over pixels valid in both; identity if degenerate or s <= 0."""
+def _align_scale_shift(pred: np.ndarray, target: np.ndarray, fit: str = "prior_to_gt") -> np.ndarray:
+    """``pred`` mapped onto ``target`` by a per-view affine map over pixels valid in both; identity if
+    degenerate or the scale is <= 0.
+
+    ``fit``: ``"prior_to_gt"`` is least squares ``s pred + t ~ target`` (pred the regressor: its errors
+    attenuate ``s``, compressing the depth range towards the view's mean); ``"gt_to_prior"`` is least
+    squares ``pred ~ c target + d`` inverted, ``(pred - d) / c`` (target the regressor: no attenuation).
+    """
     m = (pred > 0) & (target > 0)
     if m.sum() < 3:
         return pred
-    a = np.stack([pred[m], np.ones(int(m.sum()))], axis=1)
-    (s, t), *_ = np.linalg.lstsq(a, target[m], rcond=None)
+    if fit == "prior_to_gt":
+        a = np.stack([pred[m], np.ones(int(m.sum()))], axis=1)
+        (s, t), *_ = np.linalg.lstsq(a, target[m], rcond=None)
+    elif fit == "gt_to_prior":
+        a = np.stack([target[m], np.ones(int(m.sum()))], axis=1)
+        (c, d), *_ = np.linalg.lstsq(a, pred[m], rcond=None)
+        s, t = (1.0 / c, -d / c) if c > 0 else (-1.0, 0.0)
+    else:
+        raise ValueError(f"fit must be 'prior_to_gt' or 'gt_to_prior', got {fit!r}")
     if not (np.isfinite(s) and np.isfinite(t)) or s <= 0:
         return pred
     out = s * pred + t
@@ -112,6 +125,13 @@ class NormalFromDepthParams:
         doc="fit the prior depth to GT depth by per-view scale/shift before differentiating, so the "
         "unknown shift does not shear the normals",
     )
+    align_fit: str = param(
+        "prior_to_gt",
+        "choice",
+        choices=("prior_to_gt", "gt_to_prior"),
+        doc="the alignment's least squares: GT ~ s prior + t (the prior's errors attenuate s, so grazing "
+        "surfaces face the camera more) or prior ~ c GT + d inverted (no attenuation; a diagnostic, session 14)",
+    )
 
 
 @register("normal_from_depth", NormalFromDepthParams, needs=("mono_depth", "intrinsics"))
@@ -129,7 +149,8 @@ def normal_from_depth(scene: Scene, p: NormalFromDepthParams, rng: np.random.Gen
     pixels; renormalise to unit length and orient towards the camera; 0 where the depth prior is
     invalid. Deterministic (draws nothing from ``rng``).
 
-    Parameters: blend_gt (weight in [0, 1]), smooth_px (pixels), align_to_gt (bool).
+    Parameters: blend_gt (weight in [0, 1]), smooth_px (pixels), align_to_gt (bool), align_fit (which
+    least-squares direction aligns the depth).
     """
     depth = cast(np.ndarray, scene.mono_depth)  # rendered by the synthesiser before any effect runs
     n_views, h, w = depth.shape
@@ -139,7 +160,7 @@ def normal_from_depth(scene: Scene, p: NormalFromDepthParams, rng: np.random.Gen
         d = depth[v].astype(np.float64)
         valid = d > 0
         if p.align_to_gt and scene.gt_depth is not None:
-            d = _align_scale_shift(d, scene.gt_depth[v].astype(np.float64))
+            d = _align_scale_shift(d, scene.gt_depth[v].astype(np.float64), p.align_fit)
         K = np.asarray(scene.intrinsics[v], dtype=np.float64)
         n = normals_from_depth(d, K)
         dirs = pixel_rays(K, h, w)
