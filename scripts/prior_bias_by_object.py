@@ -73,23 +73,21 @@ def main() -> None:
     per_object: dict[tuple[str, str], list[np.ndarray]] = {}
     for v in range(scene.num_views):
         inst = scene.gt_instance[v]
+        maps = aligned_ratios(scene.mono_depth[v].astype(np.float64), scene.gt_depth[v].astype(np.float64))
         if scene.mono_normal is not None and scene.gt_normal is not None:
             K = np.asarray(scene.intrinsics[v], dtype=np.float64)
             has = (np.linalg.norm(scene.mono_normal[v], axis=-1) > 0.5) & (np.linalg.norm(scene.gt_normal[v], axis=-1) > 0.5)
-            bias = np.where(has, facing_angle_deg(scene.mono_normal[v].astype(np.float64), K)
-                            - facing_angle_deg(scene.gt_normal[v].astype(np.float64), K), np.nan)
-            for iid in np.unique(inst[has]):
-                info = scene.instances.get(int(iid))
-                per_object.setdefault((info.name if info else str(iid), "normal_facing_bias_deg"), []).append(bias[has & (inst == iid)])
-        for align, ratio in aligned_ratios(scene.mono_depth[v].astype(np.float64), scene.gt_depth[v].astype(np.float64)).items():
-            ok = np.isfinite(ratio)
+            maps["normal_facing_bias_deg"] = np.where(has, facing_angle_deg(scene.mono_normal[v].astype(np.float64), K)
+                                                      - facing_angle_deg(scene.gt_normal[v].astype(np.float64), K), np.nan)
+        for column, values in maps.items():  # (H, W), NaN where not measured
+            ok = np.isfinite(values)
             for iid in np.unique(inst[ok]):
                 info = scene.instances.get(int(iid))
-                per_object.setdefault((info.name if info else str(iid), align), []).append(ratio[ok & (inst == iid)])
-    rows = [{"object": obj, "column": col, "pixels": int(sum(r.size for r in rs)), "median": float(np.median(np.concatenate(rs)))}
-            for (obj, col), rs in per_object.items()]
-    df = pd.DataFrame(rows).pivot(index="object", columns="column", values="median")
-    df["pixels"] = pd.DataFrame(rows).query("column == 'prior_to_gt'").set_index("object")["pixels"]
+                per_object.setdefault((info.name if info else str(iid), column), []).append(values[ok & (inst == iid)])
+    rows = pd.DataFrame([{"object": obj, "column": col, "pixels": int(sum(r.size for r in rs)),
+                          "median": float(np.median(np.concatenate(rs)))} for (obj, col), rs in per_object.items()])
+    df = rows.pivot(index="object", columns="column", values="median")
+    df["pixels"] = rows.query("column == 'prior_to_gt'").set_index("object")["pixels"]
     print(f"{args.scene}: per GT object over {scene.num_views} views, median (aligned prior / GT depth) under both "
           "alignments and the normal prior's facing bias (degrees)")
     print(df.sort_values("pixels", ascending=False).to_string(float_format=lambda x: f"{x:.3f}"))

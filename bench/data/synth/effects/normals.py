@@ -101,7 +101,9 @@ def _align_scale_shift(pred: np.ndarray, target: np.ndarray, fit: str = "prior_t
     elif fit == "gt_to_prior":
         a = np.stack([target[m], np.ones(int(m.sum()))], axis=1)
         (c, d), *_ = np.linalg.lstsq(a, pred[m], rcond=None)
-        s, t = (1.0 / c, -d / c) if c > 0 else (-1.0, 0.0)
+        if not c > 0:  # the prior does not grow with GT depth: no alignment
+            return pred
+        s, t = 1.0 / c, -d / c
     else:
         raise ValueError(f"fit must be 'prior_to_gt' or 'gt_to_prior', got {fit!r}")
     if not (np.isfinite(s) and np.isfinite(t)) or s <= 0:
