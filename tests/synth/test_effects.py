@@ -386,6 +386,32 @@ def test_normal_blend_and_smoothing_keep_unit_length(scene):
     assert err_blend < err_raw
 
 
+
+def test_normal_rotation_is_one_rigid_rotation_per_view(scene):
+    """``normal_rotation``: each view's normals turned by one rotation of the recorded angle about the recorded
+    axis (so a plane's normals stay equal to each other), unit length kept, invalid pixels 0, angles in
+    [0, max_deg]; max_deg 0 leaves the normals untouched."""
+    s0 = copy.deepcopy(scene)
+    apply_effects(s0, [{"name": "normal_rotation", "max_deg": 0.0}], rng())
+    np.testing.assert_array_equal(s0.mono_normal, _SCENE.mono_normal)
+    (rec,) = apply_effects(scene, [{"name": "normal_rotation", "max_deg": 20.0}], rng(3))
+    assert changed_fields(scene, _SCENE) == {"mono_normal"}
+    angles, axes = rec["sampled"]["angle_deg"], rec["sampled"]["axis"]
+    assert len(angles) == scene.num_views and all(0.0 <= a <= 20.0 for a in angles) and max(angles) > 1.0
+    for v in range(scene.num_views):
+        before, after = _SCENE.mono_normal[v].astype(np.float64), scene.mono_normal[v].astype(np.float64)
+        valid = np.linalg.norm(before, axis=-1) > 0.5
+        assert (after[~valid] == 0).all()
+        assert np.allclose(np.linalg.norm(after[valid], axis=-1), 1.0, atol=1e-5)
+        axis, theta = np.asarray(axes[v]), np.radians(angles[v])
+        # Rodrigues, written out per vector: n cos + (k x n) sin + k (k . n)(1 - cos)
+        n = before[valid]
+        expect = n * np.cos(theta) + np.cross(axis, n) * np.sin(theta) + axis * (n @ axis)[:, None] * (1 - np.cos(theta))
+        np.testing.assert_allclose(after[valid], expect, atol=1e-5)
+        m = interior_floor(scene, v, 1)
+        assert np.ptp(scene.mono_normal[v][m], axis=0).max() < 1e-5  # a plane stays a plane
+
+
 # ----------------------------------------------------------------------------- segmentation
 def contingency(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Pixel counts of (id in a, id in b) pairs, rows = a ids, columns = b ids (0 included)."""
@@ -466,6 +492,7 @@ EXPECTED_FIELDS = {
     "lowfreq_warp": {"mono_depth"},
     "depth_noise": {"mono_depth"},
     "normal_from_depth": {"mono_normal"},
+    "normal_rotation": {"mono_normal"},
     "segmentation_inconsistent": {"seg_masks", "seg_background"},
     "sensor_noise": {"images"},
     "exposure_change": {"images"},

@@ -5,7 +5,7 @@ truth and calls :func:`apply_effects` with the recipe's effect list; each effect
 function with typed, validated parameters (see ``EFFECTS`` and ``docs/effects.md``).
 
 Modules: ``depth`` (mono_depth_affine, depth_bleeding, lowfreq_warp, depth_noise), ``normals``
-(normal_from_depth), ``segmentation`` (segmentation_inconsistent), ``image`` (sensor_noise,
+(normal_from_depth, normal_rotation), ``segmentation`` (segmentation_inconsistent), ``image`` (sensor_noise,
 exposure_change), ``profiles`` (prior_profile, PRIOR_PROFILES).
 """
 

@@ -181,3 +181,42 @@ def normal_from_depth(scene: Scene, p: NormalFromDepthParams, rng: np.random.Gen
             n = _orient_and_mask(n, dirs, valid)
         scene.mono_normal[v] = n.astype(np.float32)
     return None
+
+
+@dataclass(frozen=True)
+class NormalRotationParams:
+    max_deg: float = param(
+        5.0, "float", lo=0.0, hi=90.0, unit="deg", doc="per-view rotation angle, drawn uniformly in [0, max_deg]"
+    )
+
+
+@register("normal_rotation", NormalRotationParams, needs=("mono_normal",))
+def normal_rotation(scene: Scene, p: NormalRotationParams, rng: np.random.Generator) -> dict[str, list[float]]:
+    """Per-view rigid rotation of the normal prior: one rotation for all pixels of a view.
+
+    Models: a normal network's per-image orientation bias, e.g. the gravity bias of networks trained on
+    upright images, which rotates the prediction of a tilted camera as a whole (Do et al., ECCV 2020,
+    "Surface normal estimation of tilted images via spatial rectifier"). Planes stay planar and the
+    normals of one view stay mutually consistent; only the views disagree. A different error character
+    from ``normal_from_depth`` after ``lowfreq_warp``, whose normals bend smoothly across each view.
+
+    Per view: axis uniform on the unit sphere, angle ``~ U(0, max_deg)``; every valid (non-zero) camera-frame
+    normal is rotated (Rodrigues), unit length kept, not re-oriented (a grazing normal may end up facing
+    away, as a real network's can); invalid pixels stay 0.
+
+    Parameters: max_deg (degrees).
+    """
+    normals = cast(np.ndarray, scene.mono_normal)
+    angles, axes = [], []
+    for v in range(normals.shape[0]):
+        axis = rng.standard_normal(3)
+        axis /= max(float(np.linalg.norm(axis)), 1e-12)
+        theta = float(np.radians(rng.uniform(0.0, p.max_deg)))
+        kx = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+        rot = np.eye(3) + np.sin(theta) * kx + (1.0 - np.cos(theta)) * (kx @ kx)
+        n = normals[v].astype(np.float64)
+        valid = np.linalg.norm(n, axis=-1) > 0.5
+        normals[v] = np.where(valid[..., None], n @ rot.T, 0.0).astype(np.float32)
+        angles.append(float(np.degrees(theta)))
+        axes.append([float(a) for a in axis])
+    return {"angle_deg": angles, "axis": axes}
