@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import cast
+from typing import Any, cast
 
 import numpy as np
 from scipy import ndimage
@@ -191,7 +191,7 @@ class NormalRotationParams:
 
 
 @register("normal_rotation", NormalRotationParams, needs=("mono_normal",))
-def normal_rotation(scene: Scene, p: NormalRotationParams, rng: np.random.Generator) -> dict[str, list[float]]:
+def normal_rotation(scene: Scene, p: NormalRotationParams, rng: np.random.Generator) -> dict[str, list[Any]]:
     """Per-view rigid rotation of the normal prior: one rotation for all pixels of a view.
 
     Models: a normal network's per-image orientation bias, e.g. the gravity bias of networks trained on
