@@ -386,7 +386,6 @@ def test_normal_blend_and_smoothing_keep_unit_length(scene):
     assert err_blend < err_raw
 
 
-
 def test_normal_rotation_is_one_rigid_rotation_per_view(scene):
     """``normal_rotation``: each view's normals turned by one rotation of the recorded angle about the recorded
     axis (so a plane's normals stay equal to each other), unit length kept, invalid pixels 0, angles in

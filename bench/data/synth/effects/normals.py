@@ -7,6 +7,7 @@ from typing import Any, cast
 
 import numpy as np
 from scipy import ndimage
+from scipy.spatial.transform import Rotation
 
 from bench.data.scene import Scene
 from metrics.camera import pixel_rays
@@ -201,7 +202,7 @@ def normal_rotation(scene: Scene, p: NormalRotationParams, rng: np.random.Genera
     from ``normal_from_depth`` after ``lowfreq_warp``, whose normals bend smoothly across each view.
 
     Per view: axis uniform on the unit sphere, angle ``~ U(0, max_deg)``; every valid (non-zero) camera-frame
-    normal is rotated (Rodrigues), unit length kept, not re-oriented (a grazing normal may end up facing
+    normal is rotated (scipy's ``Rotation.from_rotvec``), unit length kept, not re-oriented (a grazing normal may end up facing
     away, as a real network's can); invalid pixels stay 0.
 
     Parameters: max_deg (degrees).
@@ -212,8 +213,7 @@ def normal_rotation(scene: Scene, p: NormalRotationParams, rng: np.random.Genera
         axis = rng.standard_normal(3)
         axis /= max(float(np.linalg.norm(axis)), 1e-12)
         theta = float(np.radians(rng.uniform(0.0, p.max_deg)))
-        kx = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
-        rot = np.eye(3) + np.sin(theta) * kx + (1.0 - np.cos(theta)) * (kx @ kx)
+        rot = Rotation.from_rotvec(theta * axis).as_matrix()
         n = normals[v].astype(np.float64)
         valid = np.linalg.norm(n, axis=-1) > 0.5
         normals[v] = np.where(valid[..., None], n @ rot.T, 0.0).astype(np.float32)
