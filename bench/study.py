@@ -34,6 +34,8 @@ from bench.convergence import ConvergenceSpec, check_run
 from bench.data.atomic import atomic_write_bytes, atomic_write_text
 from bench.data.errors import BenchInputError
 
+SHIPPED_TABLES = Path(__file__).resolve().parent.parent / "configs" / "tables"
+
 
 @dataclasses.dataclass(frozen=True)
 class StudyRun:
@@ -193,26 +195,42 @@ def _worker_init() -> None:
     set_job_threads(1)
 
 
-def convergence_checks(curve: pd.DataFrame, flat_tol: float = 0.03, drop_tol: float = 0.05) -> dict[str, Any]:
-    """The issue tracker's convergence criteria on one run's F-score curve (:mod:`bench.convergence`):
-    ``flat``: |F(50 %) - F(100 %)| <= flat_tol (F at the snapshot nearest 50 %); ``no_drop``: no snapshot
-    after 25 % is more than drop_tol below the one before."""
-    f = curve["fscore"] if "fscore" in curve else np.full(len(curve), np.nan)
-    c = check_run(curve["fraction"].to_numpy(dtype=float), np.asarray(f, dtype=float),
-                  ConvergenceSpec(metric="fscore", flat=flat_tol, drop=drop_tol))
-    return {"flat": c.flat, "no_drop": c.no_drop, "f_half": c.half, "max_drop": c.max_drop}
+def convergence_checks(curve: pd.DataFrame, spec: ConvergenceSpec = ConvergenceSpec()) -> dict[str, Any]:
+    """The issue tracker's convergence criteria on one run's curve of ``spec.metric`` (:mod:`bench.convergence`):
+    ``flat``: the value at the snapshot nearest 50 % within ``spec.flat`` of the final one; ``no_drop``: no
+    snapshot after 25 % more than ``spec.drop`` worse than the one before (worse in the metric's direction)."""
+    v = curve[spec.metric] if spec.metric in curve else np.full(len(curve), np.nan)
+    c = check_run(curve["fraction"].to_numpy(dtype=float), np.asarray(v, dtype=float), spec)
+    return {"flat": c.flat, "no_drop": c.no_drop, "half": c.half, "max_drop": c.max_drop}
 
 
-def summarise(df: pd.DataFrame, key: str | None) -> str:
-    """Markdown: per sweep value, final metrics mean ± std over seeds and the convergence checks."""
-    lines = [f"| {key or 'config'} | seeds | F final | F std | F at 50 % | Acc | Comp | depth err (m) | beta | flat (all seeds) | no drop (all seeds) | s / run |",
+def study_convergence_spec(protocol: str, tables_dir: Path = SHIPPED_TABLES) -> ConvergenceSpec:
+    """The criteria a study judges its runs by: those of the first table spec in ``tables_dir`` (by name)
+    that evaluates ``protocol`` and states criteria (DTU: the Chamfer distance of Table 2; ScanNet / Replica:
+    the F-score of Tables 1 / 4 / 5), so a study and the table it prepares judge alike; the F-score defaults
+    of :class:`ConvergenceSpec` when no table does."""
+    from bench.table_spec import list_tables, load_table_spec
+
+    for name in list_tables(tables_dir):
+        spec = load_table_spec(Path(tables_dir) / f"{name}.yaml")
+        if spec.convergence is not None and any(g.protocol == protocol for g in spec.groups):
+            return spec.convergence
+    return ConvergenceSpec()
+
+
+def summarise(df: pd.DataFrame, key: str | None, spec: ConvergenceSpec = ConvergenceSpec()) -> str:
+    """Markdown: per sweep value, final metrics mean ± std over seeds and the convergence checks of ``spec``
+    (its metric is the headline column)."""
+    m = spec.metric
+    lines = [f"| {key or 'config'} | seeds | {m} final | {m} std | {m} at 50 % | Acc | Comp | depth err (m) | beta | flat (all seeds) | no drop (all seeds) | s / run |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    fmt = ".3f" if spec.higher_is_better else ".4f"
     for value, g in df.groupby("value", sort=False):
         finals, checks = [], []
         for _, run in g.groupby("seed"):
             run = run.sort_values("fraction")
             finals.append(run.iloc[-1])
-            checks.append(convergence_checks(run))
+            checks.append(convergence_checks(run, spec))
         fin = pd.DataFrame(finals)
 
         def ms(col: str, fmt: str = ".3f") -> str:
@@ -220,14 +238,17 @@ def summarise(df: pd.DataFrame, key: str | None) -> str:
                 return "-"
             return f"{fin[col].mean():{fmt}}"
 
-        f_std = f"{fin['fscore'].std(ddof=0):.3f}" if "fscore" in fin else "-"
-        half = np.nanmean([c["f_half"] for c in checks])
-        lines.append(f"| {value} | {len(fin)} | {ms('fscore')} | {f_std} | {half:.3f} | {ms('acc')} | {ms('comp')} | {ms('depth_err_median', '.4f')} "
+        m_std = f"{fin[m].std(ddof=0):{fmt}}" if m in fin else "-"
+        half = np.nanmean([c["half"] for c in checks])
+        lines.append(f"| {value} | {len(fin)} | {ms(m, fmt)} | {m_std} | {half:{fmt}} | {ms('acc')} | {ms('comp')} | {ms('depth_err_median', '.4f')} "
                      f"| {ms('beta', '.4f')} | {all(c['flat'] for c in checks)} | {all(c['no_drop'] for c in checks)} | {ms('fit_seconds', '.0f')} |")
-    return "\n".join(lines) + "\n"
+    criteria = (f"Criteria ({m}, `bench.study.study_convergence_spec`): flat = value at 50 % within {spec.flat:g} of the final; "
+                f"no drop = no snapshot after 25 % more than {spec.drop:g} {'below' if spec.higher_is_better else 'above'} the one before; "
+                f"a table row also needs the seed std <= {spec.seed_std:g}.")
+    return "\n".join(lines) + "\n\n" + criteria + "\n"
 
 
-PLOT_PANELS = (("fscore", "F-score"), ("acc", "Acc (m)"), ("comp", "Comp (m)"), ("depth_err_median", "median |depth - GT| (m)"),
+PLOT_PANELS = (("fscore", "F-score"), ("cd", "Chamfer (m)"), ("acc", "Acc (m)"), ("comp", "Comp (m)"), ("depth_err_median", "median |depth - GT| (m)"),
                ("beta", "beta"), ("loss_color", "colour loss"))
 
 
@@ -276,7 +297,8 @@ def run_study(method: str, scene: str, scale: str, seeds: list[int], overrides: 
     key, values = parse_sweep(sweep)
     method_config(method, scale, {**overrides, **({key: values[0]} if key else {})})  # unknown keys: one clear error, before any work
     exact_priors = exact_priors_choice(exact_priors)
-    load_study_scene(scene, scale, exact_priors)  # bad scene: fail now (and synthesise it once, before the workers)
+    protocol = load_study_scene(scene, scale, exact_priors).source_format  # bad scene: fail now (and synthesise it once, before the workers)
+    spec = study_convergence_spec(protocol)
     mesh_dir = str(Path(out_dir) / "meshes")
     runs = [StudyRun(method, scene, scale, int(s), {**overrides, **({key: v} if key else {})}, exact_priors, v, key, mesh_dir)
             for v in values for s in seeds]
@@ -302,12 +324,12 @@ def run_study(method: str, scene: str, scale: str, seeds: list[int], overrides: 
             recs = fut.result()
             records.extend(recs)
             last = recs[-1]
-            f_str = ", ".join(f"{x.get('fscore', float('nan')):.3f}" for x in recs)
-            log(f"[study] {f'{key}={r.sweep_value} ' if key else ''}seed {r.seed}: F along the schedule {f_str}; "
+            m_str = ", ".join(f"{x.get(spec.metric, float('nan')):.4g}" for x in recs)
+            log(f"[study] {f'{key}={r.sweep_value} ' if key else ''}seed {r.seed}: {spec.metric} along the schedule {m_str}; "
                 f"depth err {last.get('depth_err_median', float('nan')):.4f} m; beta {last.get('beta', float('nan')):.4f}; "
                 f"{last['fit_seconds']:.0f} s ({time.perf_counter() - t0:.0f} s elapsed)")
             df = _write_outputs(records, values, key, out_dir, title + (f"; stopped at {stop_at:.0%} of the schedule" if stop_at < 1 else ""),
-                                seeds, snapshots)  # after every run: a partial study is readable
+                                seeds, snapshots, spec)  # after every run: a partial study is readable
     except BaseException:  # Ctrl-C / SIGTERM / a failed run: stop the running workers too, not only the queue
         for proc in list(getattr(pool, "_processes", {}).values()):
             proc.terminate()
@@ -319,7 +341,7 @@ def run_study(method: str, scene: str, scale: str, seeds: list[int], overrides: 
 
 
 def _write_outputs(records: list[dict[str, Any]], values: list[Any], key: str | None, out_dir: Path, title: str,
-                   seeds: list[int], snapshots: int) -> pd.DataFrame:
+                   seeds: list[int], snapshots: int, spec: ConvergenceSpec = ConvergenceSpec()) -> pd.DataFrame:
     """study.csv / study.png / study.md from the runs finished so far (each written atomically)."""
     df = pd.DataFrame(records)
     order = {json.dumps(v): i for i, v in enumerate(values)}
@@ -329,6 +351,6 @@ def _write_outputs(records: list[dict[str, Any]], values: list[Any], key: str | 
     atomic_write_text(out_dir / "study.csv", df.to_csv(index=False))
     atomic_write_bytes(out_dir / "study.png", plot_study(df, title))
     md = (f"# Convergence study: {title}\n\nseeds {seeds}; {snapshots} snapshots; sweep {key or '-'} over {values}\n\n"
-          + summarise(df, key) + "\n![curves](study.png)\n")
+          + summarise(df, key, spec) + "\n![curves](study.png)\n")
     atomic_write_text(out_dir / "study.md", md)
     return df

@@ -6,17 +6,31 @@ import pandas as pd
 import pytest
 
 from bench.cli import main
-from bench.study import convergence_checks, exact_priors_choice, load_study_scene, parse_sweep
+from bench.convergence import ConvergenceSpec
+from bench.study import convergence_checks, exact_priors_choice, load_study_scene, parse_sweep, study_convergence_spec
 
 
 def test_convergence_checks_follow_the_issue_criteria():
     flat = pd.DataFrame({"fraction": [0.25, 0.5, 0.75, 1.0], "fscore": [0.5, 0.80, 0.81, 0.82]})
-    assert convergence_checks(flat) == {"flat": True, "no_drop": True, "f_half": 0.80, "max_drop": pytest.approx(0.0)}
+    assert convergence_checks(flat) == {"flat": True, "no_drop": True, "half": 0.80, "max_drop": pytest.approx(0.0)}
     climbing = pd.DataFrame({"fraction": [0.25, 0.5, 0.75, 1.0], "fscore": [0.5, 0.6, 0.7, 0.8]})
     assert not convergence_checks(climbing)["flat"]
     swinging = pd.DataFrame({"fraction": [0.25, 0.5, 0.75, 1.0], "fscore": [0.7, 0.8, 0.7, 0.8]})
     c = convergence_checks(swinging)
     assert c["flat"] and not c["no_drop"] and c["max_drop"] == pytest.approx(0.1)
+
+
+def test_a_study_judges_by_the_criteria_of_the_table_of_its_protocol():
+    dtu = study_convergence_spec("dtu")  # Table 2: the Chamfer distance, lower is better
+    assert dtu.metric == "cd" and not dtu.higher_is_better
+    assert study_convergence_spec("scannet").metric == "fscore" == study_convergence_spec("replica").metric
+    # an error metric: a rise is a worsening, a fall is not
+    spec = ConvergenceSpec(metric="cd", flat=0.0006, drop=0.001, higher_is_better=False)
+    falling = pd.DataFrame({"fraction": [0.25, 0.5, 0.75, 1.0], "cd": [0.020, 0.0105, 0.0102, 0.0100]})
+    assert convergence_checks(falling, spec) == {"flat": True, "no_drop": True, "half": 0.0105, "max_drop": pytest.approx(0.0)}
+    rising = pd.DataFrame({"fraction": [0.25, 0.5, 0.75, 1.0], "cd": [0.010, 0.010, 0.012, 0.011]})
+    c = convergence_checks(rising, spec)
+    assert not c["flat"] and not c["no_drop"] and c["max_drop"] == pytest.approx(0.002)
 
 
 def test_exact_priors_replace_the_chosen_prior_only():
