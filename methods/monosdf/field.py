@@ -1,8 +1,14 @@
 """The SDF and colour networks (MonoSDF's grid variant, scaled down for a CPU).
 
-SDF network: ``[grid features(x / R), PE(x / R)] -> Softplus(beta=100) MLP -> (sdf, geometry feature)``, with
-``PE(u) = [u, sin(2^k u), cos(2^k u)]_{k < pe_frequencies}`` (MonoSDF's grid config: ``multires = 6``;
-``pe_frequencies = 0`` feeds ``u`` alone).
+SDF network: ``[grid features(x / R), PE(x)] -> Softplus(beta=100) MLP -> (sdf, geometry feature)``, with
+``PE(x) = [x, sin(2^k x), cos(2^k x)]_{k < pe_frequencies}`` (MonoSDF's grid config: ``multires = 6``;
+``pe_frequencies = 0`` feeds ``x`` alone). As MonoSDF's ``ImplicitNetworkGrid``: the MLP and the encoding
+see the point in normalised units (``x``), only the grid sees it divided by the bounding-sphere radius
+(MonoSDF's ``divide_factor``, which its configs set to the sphere: 1.0-1.5 for rooms, 5.0 for DTU), and the
+SDF is the MLP output itself. For a room (R = 1) this is the same arithmetic as dividing everything by R;
+for an object scene (R = 4) the earlier layout (MLP on ``x / R``, output times R) shrank the object 4x in
+the MLP's coordinates and made every step of the MLP's weights move the SDF 4x as far (docs/monosdf.md,
+"Object scenes").
 Its spatial gradient (normals, eikonal term) is computed EXPLICITLY as differentiable tensor ops: the
 grid returns ``d feat / d x`` analytically, and the MLP's vector-Jacobian product for its single SDF
 output is written out layer by layer (``g <- (g * softplus'(z)) @ W``, softplus' = a sigmoid). The
@@ -109,12 +115,12 @@ class SDFNetwork(torch.nn.Module):
 
     Two layouts of MonoSDF's ``ImplicitNetwork(Grid)``:
 
-    * grid variant (``spec`` given): input ``[grid features(x / R), PE(x / R)]``;
+    * grid variant (``spec`` given): input ``[grid features(x / R), PE(x)]``;
     * MLP variant (``spec=None``, MonoSDF / the MonoInstance release ``use_grid_feature = False``): input
-      ``PE(x / R)`` alone, usually with a deeper MLP and ``skip`` (MonoSDF: 8 x 256, skip at layer 4).
+      ``PE(x)`` alone, usually with a deeper MLP and ``skip`` (MonoSDF: 8 x 256, skip at layer 4).
 
     ``skip`` lists linear layers ``l`` (0-based positions in ``self.linears``, >= 1) whose input is
-    ``[a_l, PE(x / R)] / sqrt(2)`` (IDR / MonoSDF ``skip_in``: the encoding re-enters the MLP; the layer
+    ``[a_l, PE(x)] / sqrt(2)`` (IDR / MonoSDF ``skip_in``: the encoding re-enters the MLP; the layer
     before it outputs ``hidden - PE width`` so that the concatenation is ``hidden`` wide). ``weight_norm``:
     every SDF linear layer is weight-normalised (``torch.nn.utils.parametrizations.weight_norm``; MonoSDF:
     ``weight_norm = True``), applied after the geometric init.
@@ -169,7 +175,7 @@ class SDFNetwork(torch.nn.Module):
         return feat * (torch.arange(feat.shape[-1]) < self.active_levels * self.grid.spec.features).to(feat.dtype)
 
     def encode(self, u: torch.Tensor) -> torch.Tensor:
-        """Positional encoding of ``u = x / R`` (P, 3) -> (P, 3 + 6F) ``[u, sin(f_k u), cos(f_k u)]`` with the
+        """Positional encoding of ``u = x`` (P, 3, normalised units) -> (P, 3 + 6F) ``[u, sin(f_k u), cos(f_k u)]`` with the
         k-major layout ``[sin k=0 xyz, ..., sin k=F-1 xyz, cos ...]`` (``u`` alone without frequencies).
         C++ kernel (``_encoding_kernel.cpp``) when the fast path is on; :meth:`encode_reference` is its twin."""
         if self.pe_frequencies and self.fast and u.dtype == torch.float32 and fast_available():
@@ -207,17 +213,16 @@ class SDFNetwork(torch.nn.Module):
         return gin_pe[:, :3] + ((g_sin * cos - g_cos * sin) * self.pe_freqs[None, :, None]).sum(1)
 
     def _geometric_init(self, r: float, inside_out: bool) -> None:
-        """IDR geometric init: a sphere SDF of radius r in normalised-by-R coordinates. Grid features and
+        """IDR geometric init: a sphere SDF of radius r in normalised units. Grid features and
         positional-encoding frequencies start with zero weights (first layer, and the encoding's columns
         of every skip layer): the MLP sees only x at init."""
-        r_norm = r / self.radius
         for i, module in enumerate(self.linears):
             lin = cast(torch.nn.Linear, module)
             out_dim, in_dim = lin.weight.shape
             if i == len(self.linears) - 1:
                 mean = math.sqrt(math.pi) / math.sqrt(in_dim)
                 torch.nn.init.normal_(lin.weight, mean=-mean if inside_out else mean, std=1e-4)
-                torch.nn.init.constant_(lin.bias, r_norm if inside_out else -r_norm)
+                torch.nn.init.constant_(lin.bias, r if inside_out else -r)
             else:
                 torch.nn.init.constant_(lin.bias, 0.0)
                 torch.nn.init.normal_(lin.weight, 0.0, math.sqrt(2) / math.sqrt(out_dim))
@@ -237,12 +242,11 @@ class SDFNetwork(torch.nn.Module):
         Returns:
             sdf (P,) in normalised units (clamped to the sphere), geometry feature (P, G), gradient (P, 3) or None.
         """
-        xs = x / self.radius
-        pe = self.encode(xs)  # (P, 3 + 6 F_pe)
+        pe = self.encode(x)  # (P, 3 + 6 F_pe)
         blocks = [pe]
         jac = None
         if self.grid is not None:
-            feat, jac = self.grid(xs, with_jacobian=with_gradient)
+            feat, jac = self.grid(x / self.radius, with_jacobian=with_gradient)  # d feat / d (x / R)
             feat = self.level_mask(feat)
             jac = None if jac is None else self.level_mask(jac)  # (P, 3, L * F): the same mask on the last axis
             blocks = [feat, pe]
@@ -258,7 +262,7 @@ class SDFNetwork(torch.nn.Module):
             a, slope = _softplus_and_slope(z, self.fast)
             slopes.append(slope)
         out = linear_blocks([a, pe], ws[-1], bs[-1]) if n_lin - 1 in self.skip else torch.addmm(bs[-1], a, ws[-1].t())
-        sdf_net = out[:, 0] * self.radius  # the MLP works in x / R units; the SDF in normalised units
+        sdf_net = out[:, 0]  # normalised units (MonoSDF: the MLP output is the SDF)
         geo = out[:, 1:]
         grad = None
         if with_gradient:
@@ -278,10 +282,10 @@ class SDFNetwork(torch.nn.Module):
             c = self.n_grid
             # one product per input block of the first layer (grid / encoding), then each block's own chain rule
             gin_pe = g0 @ ws[0][:, c:]
-            grad = self.pe_chain(gin_pe if g_pe is None else gin_pe + g_pe, pe)  # (P, 3); 1/R and x R cancel
+            grad = self.pe_chain(gin_pe if g_pe is None else gin_pe + g_pe, pe)  # (P, 3)
             if self.grid is not None:
                 assert jac is not None  # the grid returns the Jacobian when asked (with_jacobian=with_gradient)
-                grad = jacobian_contract(jac, g0 @ ws[0][:, :c], self.fast) + grad
+                grad = jacobian_contract(jac, g0 @ ws[0][:, :c], self.fast) / self.radius + grad  # the grid reads x / R
         # bounding-sphere clamp (MonoSDF): every ray terminates inside the sphere
         norm = x.norm(dim=-1)
         sphere = self.radius - norm
@@ -301,17 +305,16 @@ def sdf_gradient_autograd(net: SDFNetwork, x: torch.Tensor, create_graph: bool =
     from methods.monosdf.grid import interpolate_reference
 
     x = x.detach().requires_grad_(True)
-    xs = x / net.radius
-    pe = net.encode_reference(xs)
+    pe = net.encode_reference(x)
     a = pe
     if net.grid is not None:
-        feat, _ = interpolate_reference(net.grid.table, xs, net.grid.spec, with_jacobian=False)
+        feat, _ = interpolate_reference(net.grid.table, x / net.radius, net.grid.spec, with_jacobian=False)
         a = torch.cat([net.level_mask(feat), pe], dim=-1)
     for i, lin in enumerate(net.linears):
         if i in net.skip:
             a = torch.cat([a, pe], dim=-1) / math.sqrt(2)
         a = lin(a) if i == len(net.linears) - 1 else F.softplus(lin(a), beta=SOFTPLUS_BETA)
-    sdf = torch.minimum(a[:, 0] * net.radius, net.radius - x.norm(dim=-1))
+    sdf = torch.minimum(a[:, 0], net.radius - x.norm(dim=-1))
     return torch.autograd.grad(sdf.sum(), x, create_graph=create_graph)[0]
 
 

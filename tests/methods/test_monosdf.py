@@ -71,9 +71,10 @@ def test_reference_jacobian_matches_finite_differences():
 
 
 # ----------------------------------------------------------------------------- field gradient vs autograd
-@pytest.mark.parametrize("fast,pe,levels", [(True, 0, 5), (False, 0, 5), (True, 6, 5), (False, 3, 5), (True, 6, 2)])
-def test_explicit_sdf_gradient_matches_autograd(fast, pe, levels):
-    net = SDFNetwork(_spec(), hidden=32, layers=2, geo_features=4, radius=1.0, fast_grid=fast, seed=0, pe_frequencies=pe)
+@pytest.mark.parametrize("fast,pe,levels,radius", [(True, 0, 5, 1.0), (False, 0, 5, 1.0), (True, 6, 5, 1.0), (False, 3, 5, 1.0),
+                                                     (True, 6, 2, 1.0), (True, 6, 5, 4.0), (False, 3, 5, 4.0)])
+def test_explicit_sdf_gradient_matches_autograd(fast, pe, levels, radius):
+    net = SDFNetwork(_spec(), hidden=32, layers=2, geo_features=4, radius=radius, fast_grid=fast, seed=0, pe_frequencies=pe)
     net.set_active_levels(levels)
     with torch.no_grad():
         net.grid.table.normal_(0, 0.3)
@@ -84,11 +85,11 @@ def test_explicit_sdf_gradient_matches_autograd(fast, pe, levels):
     torch.testing.assert_close(grad, sdf_gradient_autograd(net, x), atol=1e-3, rtol=1e-3)
 
 
-@pytest.mark.parametrize("fast,pe", [(True, 6), (False, 3), (True, 0)])
-def test_explicit_sdf_gradient_backpropagates_like_double_backward(fast, pe):
+@pytest.mark.parametrize("fast,pe,radius", [(True, 6, 1.0), (False, 3, 1.0), (True, 0, 1.0), (True, 6, 4.0)])
+def test_explicit_sdf_gradient_backpropagates_like_double_backward(fast, pe, radius):
     """The eikonal / normal losses backpropagate through the explicit gradient: its parameter gradients
     must equal autograd's double backward through the slow twin (grid table and every MLP weight)."""
-    net = SDFNetwork(_spec(), hidden=32, layers=2, geo_features=4, radius=1.0, fast_grid=fast, seed=0, pe_frequencies=pe)
+    net = SDFNetwork(_spec(), hidden=32, layers=2, geo_features=4, radius=radius, fast_grid=fast, seed=0, pe_frequencies=pe)
     with torch.no_grad():
         net.grid.table.normal_(0, 0.3)
         for lin in net.linears:
@@ -152,6 +153,32 @@ def test_mlp_variant_geometric_init_is_a_sphere(skip, weight_norm):
     assert abs(float(sdf.mean()) - (0.6 - 0.3)) < 0.1 and float(sdf.min()) > 0.0
     assert float(torch.nn.functional.cosine_similarity(grad, -d).mean()) > 0.9  # inside-out: the SDF falls outward
     assert float(net(d * 0.6)[0].mean()) < float(sdf.mean()) and float(net(d * 0.85)[0].mean()) < 0.1
+
+
+def test_object_scene_layout_is_monosdfs_the_mlp_sees_x_and_only_the_grid_sees_x_over_r():
+    """MonoSDF's ImplicitNetworkGrid: PE and MLP on x (normalised units), the grid on x / divide_factor (= R
+    here), the MLP output is the SDF. With a bounding sphere of R = 4 (DTU-like objects) the init sphere
+    has init_radius in normalised units, and the SDF equals a hand-written forward pass of that layout."""
+    net = SDFNetwork(_spec(), hidden=128, layers=2, geo_features=4, radius=4.0, init_radius=0.6, inside_out=False,
+                     pe_frequencies=6, seed=0)
+    d = torch.nn.functional.normalize(torch.randn(400, 3), dim=-1)
+    assert abs(float(net(d * 0.6)[0].mean())) < 0.1  # the zero level set near |x| = 0.6, not 0.6 x R
+    assert float(net(d * 0.2)[0].max()) < 0.0 < float(net(d * 1.2)[0].min())  # outward: negative inside
+    with torch.no_grad():
+        net.grid.table.normal_(0, 0.3)
+        for lin in net.linears:
+            lin.weight.normal_(0, 0.3)
+        x = (torch.rand(200, 3) * 2 - 1) * 2.0
+        from methods.monosdf.grid import interpolate_reference
+
+        feat, _ = interpolate_reference(net.grid.table, x / 4.0, net.grid.spec, with_jacobian=False)
+        f = 2.0 ** torch.arange(6, dtype=torch.float32)
+        pe = torch.cat([x, torch.sin(x[:, None, :] * f[None, :, None]).reshape(200, -1),
+                        torch.cos(x[:, None, :] * f[None, :, None]).reshape(200, -1)], dim=-1)
+        a = torch.nn.functional.softplus(net.linears[0](torch.cat([feat, pe], dim=-1)), beta=100.0)
+        a = torch.nn.functional.softplus(net.linears[1](a), beta=100.0)
+        want = torch.minimum(net.linears[2](a)[:, 0], 4.0 - x.norm(dim=-1))
+        torch.testing.assert_close(net(x, with_gradient=False)[0], want, atol=1e-4, rtol=1e-4)
 
 
 def test_mlp_variant_rejects_a_skip_it_cannot_build():
