@@ -34,8 +34,6 @@ from bench.convergence import ConvergenceSpec, check_run
 from bench.data.atomic import atomic_write_bytes, atomic_write_text
 from bench.data.errors import BenchInputError
 
-SHIPPED_TABLES = Path(__file__).resolve().parent.parent / "configs" / "tables"
-
 
 @dataclasses.dataclass(frozen=True)
 class StudyRun:
@@ -204,12 +202,15 @@ def convergence_checks(curve: pd.DataFrame, spec: ConvergenceSpec = ConvergenceS
     return {"flat": c.flat, "no_drop": c.no_drop, "half": c.half, "max_drop": c.max_drop}
 
 
-def study_convergence_spec(protocol: str, tables_dir: Path = SHIPPED_TABLES) -> ConvergenceSpec:
+def study_convergence_spec(protocol: str, tables_dir: Path | None = None) -> ConvergenceSpec:
     """The criteria a study judges its runs by: those of the first table spec in ``tables_dir`` (by name)
     that evaluates ``protocol`` and states criteria (DTU: the Chamfer distance of Table 2; ScanNet / Replica:
     the F-score of Tables 1 / 4 / 5), so a study and the table it prepares judge alike; the F-score defaults
-    of :class:`ConvergenceSpec` when no table does."""
+    of :class:`ConvergenceSpec` when no table does. ``tables_dir``: default the shipped configs/tables/."""
+    from bench.pipeline import SHIPPED_TABLES
     from bench.table_spec import list_tables, load_table_spec
+
+    tables_dir = SHIPPED_TABLES if tables_dir is None else tables_dir
 
     for name in list_tables(tables_dir):
         spec = load_table_spec(Path(tables_dir) / f"{name}.yaml")
