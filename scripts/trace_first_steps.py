@@ -45,19 +45,18 @@ def main() -> None:
     half = float(cfg.mesh_extent) if cfg.mesh_extent is not None else float(cfg.bounding_sphere)
     axis = torch.linspace(-half, half, args.grid)
     probe = torch.stack(torch.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
-    for it in range(args.steps + 1):
-        if it % args.every == 0:
-            with torch.no_grad():
-                sdf, _, _ = trainer.sdf(probe, with_gradient=False)
-            line = (f"it {it:5d}  min sdf {float(sdf.min()):+.3f}  inside {float((sdf < 0).float().mean()):.4f}  "
-                    f"beta {float(trainer.density.beta().detach()):.4f}")
-        if it == args.steps:
-            print(line, flush=True)
-            break
-        terms = trainer.step()
-        if it % args.every == 0:
-            print(line + "  " + "  ".join(f"{k} {v:.4f}" for k, v in terms.items() if isinstance(v, float) and k != "beta"), flush=True)
+    def probe_line(it: int) -> str:
+        with torch.no_grad():
+            sdf, _, _ = trainer.sdf(probe, with_gradient=False)
+        return (f"it {it:5d}  min sdf {float(sdf.min()):+.3f}  inside {float((sdf < 0).float().mean()):.4f}  "
+                f"beta {float(trainer.density.beta().detach()):.4f}")
 
+    for it in range(args.steps):
+        line = probe_line(it) if it % args.every == 0 else None  # the state before this step
+        terms = trainer.step()
+        if line is not None:
+            print(line + "  " + "  ".join(f"{k} {v:.4f}" for k, v in terms.items() if isinstance(v, float) and k != "beta"), flush=True)
+    print(probe_line(args.steps), flush=True)  # the state after the last step
 
 if __name__ == "__main__":
     main()
