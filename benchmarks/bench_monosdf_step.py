@@ -7,7 +7,7 @@ and a per-op breakdown from torch.profiler.
 Usage:
     .venv/bin/python benchmarks/bench_monosdf_step.py [--scene scannet_like_0] [--scale small] [--steps 20]
         [--rays 512] [--reference-grid] [--threads 2] [--no-profile] [--set prune_weight=1e-4]
-        [--train 2000 --checkpoint /tmp/monosdf_2000.pt] [--cpu-time]
+        [--train 2000 --checkpoint /tmp/monosdf_2000.pt] [--cpu-time] [--phases]
 
 ``--train N`` times the step at a late point of a schedule (beta small, most samples weightless: where
 ``prune_weight`` pays): N steps are trained first (with the config's other keys) and cached in
@@ -20,14 +20,64 @@ Goal (issue 4): >= 0.5 M ray-samples/s.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import statistics
 import time
+from typing import Callable, Iterator
 
 import torch
 
 from bench.data.datasets import load_dataset
 from methods.monosdf.trainer import MonoSDFTrainer
 from methods.registry import typed_method_config
+
+PHASES = ("step.sampler", "step.render", "render.prune_pass", "render.sdf_with_gradient", "render.color",
+          "step.backward", "step.optimizer")  # the record_function labels of MonoSDFTrainer.step / render_rays
+
+
+class PhaseClock:
+    """Stands in for ``torch.profiler.record_function`` in the trainer and renderer modules: each labelled
+    range adds its wall time (``clock``) to ``seconds[label]``, without the profiler's per-op recording
+    (which inflates a step 1.5-2x, most the backward's many small ops)."""
+
+    def __init__(self, clock: Callable[[], float]) -> None:
+        self.clock = clock
+        self.seconds: dict[str, float] = {}
+
+    @contextlib.contextmanager
+    def __call__(self, label: str) -> Iterator[None]:
+        t = self.clock()
+        try:
+            yield
+        finally:
+            self.seconds[label] = self.seconds.get(label, 0.0) + self.clock() - t
+
+
+def time_phases(trainer: MonoSDFTrainer, steps: int, clock: Callable[[], float]) -> None:
+    """Run ``steps`` more steps with :class:`PhaseClock` in place of the modules' ``record_function`` and
+    print ms per step and % of the step per phase (inclusive; ``render.*`` lie inside ``step.render``; the
+    rest of a step is the loss terms and bookkeeping)."""
+    import methods.monosdf.render as render_mod
+    import methods.monosdf.trainer as trainer_mod
+
+    phase = PhaseClock(clock)
+    modules = (render_mod, trainer_mod)
+    saved = [m.record_function for m in modules]
+    for m in modules:
+        setattr(m, "record_function", phase)
+    try:
+        t = clock()
+        for _ in range(steps):
+            trainer.step()
+        total = (clock() - t) / steps
+    finally:
+        for m, original in zip(modules, saved):
+            setattr(m, "record_function", original)
+    print(f"phases over {steps} steps ({total * 1000:.1f} ms per step; inclusive, render.* inside step.render):")
+    for name in PHASES:
+        if name in phase.seconds:
+            ms = phase.seconds[name] * 1000.0 / steps
+            print(f"  {name:28s} {ms:7.1f} ms  {100.0 * ms / (total * 1000.0):5.1f} %")
 
 
 def main() -> None:
@@ -44,6 +94,8 @@ def main() -> None:
     ap.add_argument("--train", type=int, default=0, help="train this many steps first (a late point of the schedule)")
     ap.add_argument("--checkpoint", default=None, help="cache of the --train state (loaded if it exists)")
     ap.add_argument("--cpu-time", action="store_true", help="process CPU time per step instead of wall time")
+    ap.add_argument("--phases", action="store_true", help="then time the step's phases (sampler, render, prune pass, "
+                    "SDF with gradient, colour, backward, optimiser) over --steps more steps")
     args = ap.parse_args()
 
     torch.set_num_threads(args.threads)
@@ -67,7 +119,7 @@ def main() -> None:
                 trainer.step()
             if args.checkpoint:
                 trainer.save(args.checkpoint)
-        print(f"state after {trainer.step_count} steps: beta {float(trainer.density.beta()):.4f}")
+        print(f"state after {trainer.step_count} steps: beta {float(trainer.density.beta().detach()):.4f}")
     for _ in range(args.warmup):
         trainer.step()
     clock = time.process_time if args.cpu_time else time.perf_counter
@@ -85,6 +137,8 @@ def main() -> None:
           f"{cfg.rays_per_batch} rays x {cfg.n_coarse + cfg.n_fine} samples = {samples} samples/step")
     print(f"step time: median {med * 1000:.1f} ms, best {best * 1000:.1f} ms")
     print(f"throughput: median {samples / med / 1e6:.3f} M samples/s, best {samples / best / 1e6:.3f} M samples/s")
+    if args.phases:
+        time_phases(trainer, args.steps, clock)
     if not args.no_profile:
         from torch.profiler import ProfilerActivity, profile
 

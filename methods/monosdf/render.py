@@ -18,6 +18,7 @@ from typing import Literal, overload
 
 import torch
 import torch.nn.functional as F
+from torch.profiler import record_function
 
 from methods.monosdf.field import ColorNetwork, LaplaceDensity, SDFNetwork
 
@@ -208,7 +209,7 @@ def render_rays(
     flat = pts.reshape(-1, 3)
     keep = None
     if prune_weight > 0:
-        with torch.no_grad():
+        with torch.no_grad(), record_function("render.prune_pass"):
             if coarse_sdf is None:
                 sdf_all = sdf_net(flat, with_gradient=False)[0]
             else:
@@ -221,7 +222,8 @@ def render_rays(
             keep = mask.reshape(-1).nonzero().squeeze(1)  # (K,) flat sample indices rendered with gradients
     pts_g = flat if keep is None else flat[keep]
     n_g = pts_g.shape[0]
-    sdf_g, geo, grad_g = sdf_net(pts_g if extra_points is None else torch.cat([pts_g, extra_points]), with_gradient=True)
+    with record_function("render.sdf_with_gradient"):
+        sdf_g, geo, grad_g = sdf_net(pts_g if extra_points is None else torch.cat([pts_g, extra_points]), with_gradient=True)
     assert grad_g is not None
     extra_grad = None if extra_points is None else grad_g[n_g:]
     sdf_g, geo, grad_g = sdf_g[:n_g], geo[:n_g], grad_g[:n_g]  # the rendered samples (views without extra points)
@@ -231,7 +233,8 @@ def render_rays(
         image = image[:, None].expand(R, S).reshape(-1)
         if keep is not None:
             image = image[keep]
-    rgb_g = color_net(pts_g, view if keep is None else view[keep], normals_g, geo, image)
+    with record_function("render.color"):
+        rgb_g = color_net(pts_g, view if keep is None else view[keep], normals_g, geo, image)
     if keep is None:
         sdf, grad, normals, rgb_s = sdf_g, grad_g, normals_g, rgb_g
     else:  # scatter the rendered samples into the full (R * S) layout; pruned ones: no-gradient SDF, 0 elsewhere

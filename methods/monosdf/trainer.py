@@ -21,6 +21,7 @@ from typing import Any, Callable, cast
 import numpy as np
 import torch
 import trimesh
+from torch.profiler import record_function
 
 from bench.data.config import config_record
 from bench.data.scene import Scene
@@ -255,8 +256,9 @@ class MonoSDFTrainer:
         origins, dirs = r.origins[slot], r.dirs[slot, pixels]
         # prune only while the last step left enough weightless samples to pay for the no-gradient pass
         prune = self.prune_weight if self._prunable_frac <= PRUNE_WORTH else 0.0
-        sampled = hierarchical_samples(self.sdf, self.density, origins, dirs, r.far[slot, pixels], cfg.near, cfg.n_coarse,
-                                       cfg.n_fine, self.gen, True, with_coarse_sdf=prune > 0)
+        with record_function("step.sampler"):  # phase labels: what torch.profiler shows per phase (no cost without a profiler)
+            sampled = hierarchical_samples(self.sdf, self.density, origins, dirs, r.far[slot, pixels], cfg.near, cfg.n_coarse,
+                                           cfg.n_fine, self.gen, True, with_coarse_sdf=prune > 0)
         t, coarse_sdf = (cast("tuple[torch.Tensor, torch.Tensor]", sampled) if prune > 0
                          else (cast(torch.Tensor, sampled), None))  # coarse_sdf: the sampler's SDF, reused by the pruning pass
         # eikonal points (MonoSDF): R uniform points in the bounding cube + one sample of each ray
@@ -286,8 +288,9 @@ class MonoSDFTrainer:
             if surf is not None:
                 extra.append(surf + (torch.rand(R, 3, generator=self.gen) - 0.5) * jit)
         single = len(views) == 1
-        out = self.render_pixels(views[0] if single else slot, pixels, extra_points=torch.cat(extra), t=t, prune_weight=prune,
-                                 coarse_sdf=coarse_sdf)
+        with record_function("step.render"):
+            out = self.render_pixels(views[0] if single else slot, pixels, extra_points=torch.cat(extra), t=t, prune_weight=prune,
+                                     coarse_sdf=coarse_sdf)
         terms: dict[str, tuple[float, torch.Tensor]] = {"color": (float(cfg.color_weight), color_loss(out.rgb, self.rgb[slot, pixels]))}
         g_extra = out.extra_grad
         assert g_extra is not None
@@ -308,8 +311,10 @@ class MonoSDFTrainer:
         loss = cast(torch.Tensor, sum(wt * val for wt, val in terms.values()))  # terms has "color": never the 0 start
         self._set_lr()
         self.optim.zero_grad(set_to_none=True)
-        loss.backward()
-        self.optim.step()
+        with record_function("step.backward"):
+            loss.backward()
+        with record_function("step.optimizer"):
+            self.optim.step()
         self.step_count += 1
         logs = {k: float(v.detach()) for k, (_, v) in terms.items()}
         logs["loss"] = float(loss.detach())

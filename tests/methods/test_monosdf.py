@@ -671,3 +671,24 @@ def test_eikonal_on_every_ray_sample_like_the_release(tiny_scene, prune):
     assert all(torch.isfinite(p.grad).all() for p in tr.sdf.parameters() if p.grad is not None)
     with pytest.raises(ValueError, match="eikonal_ray_sample"):
         _trainer(tiny_scene, eikonal_ray_sample="every").step()
+
+
+def test_step_labels_every_phase_the_step_benchmark_times(tiny_scene):
+    """benchmarks/bench_monosdf_step.py --phases reads these record_function labels: a renamed or dropped
+    label would silently vanish from its table, so a pruned step must show every one of them."""
+    import importlib.util
+    from pathlib import Path
+
+    from torch.profiler import ProfilerActivity, profile
+
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_monosdf_step.py"
+    spec = importlib.util.spec_from_file_location("bench_monosdf_step", path)
+    assert spec is not None and spec.loader is not None
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    tr = _trainer(tiny_scene, prune_weight=1e-4)
+    tr._prunable_frac = 0.0  # the pruned path (its extra no-gradient pass) from the first step
+    with profile(activities=[ProfilerActivity.CPU]) as prof:
+        tr.step(0)
+    seen = {e.key for e in prof.key_averages()}
+    assert set(bench.PHASES) <= seen, set(bench.PHASES) - seen
