@@ -104,3 +104,23 @@ def tiny_scene():
 def llff_tiny_scene():
     """llff_like_0 at the tiny scale (its images_N copy), loaded once per session; read-only (checked)."""
     yield from _shared_scene("llff_like_0")
+
+
+@pytest.fixture(scope="session")
+def load_script():
+    """``load_script("name")``: the module ``scripts/name.py`` (scripts are not a package), loaded once."""
+    import importlib.util
+    from pathlib import Path
+
+    cache: dict[str, object] = {}
+
+    def load(name: str):
+        if name not in cache:
+            path = Path(__file__).resolve().parents[1] / "scripts" / f"{name}.py"
+            spec = importlib.util.spec_from_file_location(name, path)
+            module = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(module)
+            cache[name] = module
+        return cache[name]
+
+    return load
