@@ -5,8 +5,8 @@ The shipped profiles compute the normal prior from the perturbed depth prior (``
 of the chain), so every random depth error of a view (its low-frequency warp, which thin parts vanish, how far
 they are pulled, the noise) is also in that view's normals. This script writes a copy of the recipe's dataset
 whose files are byte-identical to ``bench scenes make RECIPE`` except ``*_normal.npy`` (and ``meta.json``):
-those come from the same recipe's effect chain run a second time on the exact scene with another random
-stream (``numpy.random.default_rng([seed, 1, draw])``; the shipped scene uses ``[seed, 1]``). The normal errors
+those come from the same recipe made again with another random stream for its effects
+(``make_scene(..., effect_stream=draw)``: ``default_rng([seed, 1, draw])``; the shipped scene uses ``[seed, 1]``). The normal errors
 then have the same character and the same deterministic regions (edges, thin parts: both chains see the GT
 geometry), but the random part of them is drawn independently of the depth prior's.
 
@@ -20,33 +20,15 @@ Usage:
 from __future__ import annotations
 
 import argparse
-import dataclasses
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 
-def chain_normals(recipe: Any, scale: str, stream: list[int]) -> np.ndarray:
-    """The recipe's effect chain run on its exact scene with the random stream ``default_rng(stream)``.
-
-    Returns the (N, H, W, 3) camera-frame unit normal prior it leaves (0 = invalid). With ``stream =
-    [recipe.seed, 1]`` (the stream ``make_scene`` uses) it is the shipped normal prior, bit for bit.
-    """
-    from bench.data.synth.effects import apply_effects
-    from bench.data.synth.make import make_scene
-    from bench.data.synth.recipe import resolve_scale
-
-    # the same geometry, cameras and seed, no effect: exact priors; then the chain on the given stream
-    exact_scene, _ = make_scene(dataclasses.replace(recipe, effects=[], raw={**recipe.raw, "effects": []}), scale=scale)
-    where = recipe.where("effects")
-    effects = [{k: resolve_scale(v, scale, where) for k, v in e.items()} for e in recipe.effects]
-    apply_effects(exact_scene, effects, np.random.default_rng(stream), where=where)
-    return np.asarray(exact_scene.mono_normal)
-
-
 def independent_normals(recipe_ref: str, scale: str, draw: int) -> tuple[Any, Any, np.ndarray]:
-    """(shipped scene, GT mesh, (N, H, W, 3) normal prior of the independent stream ``[seed, 1, draw]``).
+    """(shipped scene, GT mesh, (N, H, W, 3) camera-frame unit normal prior of the same recipe made with the
+    independent effect stream ``[seed, 1, draw]``; 0 = invalid).
 
     Args:
         recipe_ref: a recipe name (configs/scenes) or a recipe file. scale: the scale preset. draw: >= 1.
@@ -60,7 +42,8 @@ def independent_normals(recipe_ref: str, scale: str, draw: int) -> tuple[Any, An
     path = Path(recipe_ref) if recipe_ref.endswith((".yaml", ".yml")) else recipe_path(recipe_ref)
     recipe = load_recipe(path)
     scene, gt_mesh = make_scene(recipe, scale=scale)
-    return scene, gt_mesh, chain_normals(recipe, scale, [recipe.seed, 1, draw])
+    other, _ = make_scene(recipe, scale=scale, effect_stream=draw)
+    return scene, gt_mesh, np.asarray(other.mono_normal)
 
 
 def main() -> None:

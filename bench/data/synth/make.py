@@ -23,13 +23,18 @@ from bench.data.synth.recipe import SCALES, Recipe, load_recipe, resolve_scale, 
 from bench.data.synth.render import SceneRaycaster
 
 
-def make_scene(recipe: Recipe, scale: str = "small", seed: int | None = None) -> tuple[Scene, trimesh.Trimesh]:
+def make_scene(
+    recipe: Recipe, scale: str = "small", seed: int | None = None, effect_stream: int | None = None
+) -> tuple[Scene, trimesh.Trimesh]:
     """Render ``recipe`` and apply its effects.
 
     Args:
         recipe: a parsed recipe.
         scale: one of ``SCALES`` (changes views, image size; never the method).
         seed: overrides the recipe's seed when given.
+        effect_stream: None (every shipped dataset) = the effects draw from ``default_rng([seed, 1])``;
+            an integer k = from ``default_rng([seed, 1, k])``, the same geometry and cameras with an
+            independent draw of every effect (a diagnostic: scripts/independent_normal_draw.py).
 
     Returns:
         (scene, gt_mesh): the Scene with priors after effects, and the GT mesh in world metres.
@@ -74,7 +79,7 @@ def make_scene(recipe: Recipe, scale: str = "small", seed: int | None = None) ->
         instances=instances,
         splits=layout.splits,
     )
-    effect_rng = np.random.default_rng([seed, 1])
+    effect_rng = np.random.default_rng([seed, 1] if effect_stream is None else [seed, 1, effect_stream])
     where = recipe.where("effects")
     effects = [{k: resolve_scale(v, scale, where) for k, v in e.items()} for e in recipe.effects]
     records = apply_effects(scene, effects, effect_rng, where=where)
@@ -83,6 +88,7 @@ def make_scene(recipe: Recipe, scale: str = "small", seed: int | None = None) ->
         "recipe": recipe.raw,
         "recipe_path": str(recipe.path) if recipe.path else None,
         "seed": seed,
+        **({} if effect_stream is None else {"effect_stream": effect_stream}),
         "scale": scale,
         "effects": records,
         "layout": layout.info,
