@@ -84,7 +84,7 @@ def main() -> None:
     trainer = MonoSDFTrainer(scene, cfg, seed=0)
     for _ in range(max(args.train, 3)):
         trainer.step()
-    samples = cfg.rays_per_batch * (cfg.n_coarse + cfg.n_fine)
+    samples = cfg.rays_per_batch * cfg.samples_per_ray()
 
     times = []
     for _ in range(args.steps):
@@ -93,6 +93,8 @@ def main() -> None:
         times.append(time.perf_counter() - t)
     step_s = statistics.median(times)
 
+    if cfg.sampler != "hierarchical":
+        raise SystemExit(f"bench_limits counts the FLOPs of the hierarchical sampler only (sampler: {cfg.sampler})")
     counter = FlopCounterMode(display=False)
     with counter:
         trainer.step()
@@ -115,7 +117,7 @@ def main() -> None:
     print(f"achieved {gflops:.1f} GFLOP/s = {100 * gflops / peaks[args.threads][0]:.1f} % of the 2048^3 peak, "
           f"{100 * gflops / peaks[args.threads][1]:.1f} % of the MLP-shaped peak ({args.threads} threads)")
     print(f"compute-bound limit at this FLOP count: {peaks[args.threads][1] * 1e9 / (total / samples) / 1e6:.1f} M ray-samples/s (MLP-shaped peak)")
-    print(f"effective samples per ray (weight > {WEIGHTED_SAMPLE:g}): {weighted:.1f} of {int(cfg.n_coarse) + int(cfg.n_fine)} "
+    print(f"effective samples per ray (weight > {WEIGHTED_SAMPLE:g}): {weighted:.1f} of {cfg.samples_per_ray()} "
           f"(in the steps measured)")
 
 

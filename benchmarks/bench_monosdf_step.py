@@ -108,7 +108,7 @@ def main() -> None:
     overrides.update(parse_overrides(args.set))
     cfg = typed_method_config("monosdf", args.scale, overrides)
     trainer = MonoSDFTrainer(scene, cfg, seed=0)
-    samples = cfg.rays_per_batch * (cfg.n_coarse + cfg.n_fine)
+    samples = cfg.rays_per_batch * cfg.samples_per_ray()
     if args.train:
         from pathlib import Path
 
@@ -130,11 +130,11 @@ def main() -> None:
         trainer.step()
         times.append(clock() - t)
     rendered = (trainer._log_sums["samples_rendered"] - sum0) / (trainer._log_count - count0)
-    print(f"samples rendered with gradients per ray (timed steps): {rendered:.1f} of {cfg.n_coarse + cfg.n_fine}"
+    print(f"samples rendered with gradients per ray (timed steps): {rendered:.1f} of {cfg.samples_per_ray()}"
           f" ({'cpu' if args.cpu_time else 'wall'} time below)")
     med, best = statistics.median(times), min(times)
     print(f"grid: {'reference (PyTorch)' if args.reference_grid else 'C++ kernel'}, threads {args.threads}, "
-          f"{cfg.rays_per_batch} rays x {cfg.n_coarse + cfg.n_fine} samples = {samples} samples/step")
+          f"{cfg.rays_per_batch} rays x {cfg.samples_per_ray()} samples = {samples} samples/step")
     print(f"step time: median {med * 1000:.1f} ms, best {best * 1000:.1f} ms")
     print(f"throughput: median {samples / med / 1e6:.3f} M samples/s, best {samples / best / 1e6:.3f} M samples/s")
     if args.phases:

@@ -34,6 +34,13 @@ class MonoSDFConfig:
     # sampler
     n_coarse: Annotated[int, AtLeastOne]
     n_fine: Annotated[int, NonNegative]
+    sampler: Literal["hierarchical", "error_bounded"]
+    eb_n_eval: Annotated[int, Range(lo=2)]
+    eb_n_final: Annotated[int, AtLeastOne]
+    eb_n_extra: Annotated[int, NonNegative]
+    eb_eps: Annotated[float, Positive]
+    eb_beta_iters: Annotated[int, NonNegative]
+    eb_max_rounds: Annotated[int, AtLeastOne]
     near: Annotated[float, Positive]
     bounding_sphere: Annotated[float, Positive]
     # field and its initialisation
@@ -87,6 +94,12 @@ class MonoSDFConfig:
     mesh_extent: Annotated[float, Positive] | None
     fast_grid: bool
     threads: Annotated[int, NonNegative]
+
+    def samples_per_ray(self) -> int:
+        """Samples per ray the renderer evaluates with gradients (before any pruning)."""
+        if self.sampler == "error_bounded":
+            return self.eb_n_final + min(self.eb_n_extra, self.eb_n_eval) + 2  # + near and far
+        return self.n_coarse + self.n_fine
 
     def check(self) -> str | None:
         """Constraints between keys (``bench.data.config.load_config`` raises the returned problem)."""

@@ -45,5 +45,5 @@ class MonoSDF:
             snapshots=snaps,
             timings={"setup": setup_s, "train": train_s, "mesh": mesh_s},
             iterations=trainer.step_count,
-            extra={"beta": float(trainer.density.beta().detach()), "samples_per_ray": cfg.n_coarse + cfg.n_fine},
+            extra={"beta": float(trainer.density.beta().detach()), "samples_per_ray": cfg.samples_per_ray()},
         )

@@ -1,7 +1,8 @@
 """Volume rendering of an SDF (VolSDF / MonoSDF) with a hierarchical sampler.
 
-Sampler (documented CPU-scale change; MonoSDF uses VolSDF's error-bounded sampler with 128 initial
-samples and up to 5 upsampling rounds): ``n_coarse`` stratified samples in [near, far] are evaluated
+Sampler (documented CPU-scale change, the default ``sampler: hierarchical``; MonoSDF uses VolSDF's
+error-bounded sampler with 128 initial samples and up to 5 rounds, ``sampler: error_bounded``,
+:mod:`methods.monosdf.error_bounded`): ``n_coarse`` stratified samples in [near, far] are evaluated
 WITHOUT gradients, their VolSDF weights (current beta) define a piecewise-constant pdf (+1e-5, as
 MonoSDF's guard), ``n_fine`` samples are drawn from it by inverse CDF, and the sorted union
 (``n_coarse + n_fine`` samples per ray) is evaluated with gradients and composited.
@@ -146,13 +147,15 @@ def hierarchical_samples(
 @torch.no_grad()
 def render_depth(
     sdf_net: SDFNetwork, density: LaplaceDensity, origins: torch.Tensor, dirs: torch.Tensor, z_factor: torch.Tensor,
-    far: torch.Tensor, near: float, n_coarse: int, n_fine: int,
+    far: torch.Tensor, near: float, n_coarse: int, n_fine: int, t: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """z-depth only (no colour, no normals, no gradients): (R,) normalised units. Used to render the
-    reference depth between MonoInstance's stages."""
+    reference depth between MonoInstance's stages. ``t``: (R, S) sample distances from another sampler
+    (None = the hierarchical one with ``n_coarse`` + ``n_fine``, deterministic)."""
     R = dirs.shape[0]
     origins = origins.expand(R, 3)
-    t = hierarchical_samples(sdf_net, density, origins, dirs, far, near, n_coarse, n_fine, None, False)
+    if t is None:
+        t = hierarchical_samples(sdf_net, density, origins, dirs, far, near, n_coarse, n_fine, None, False)
     sdf, _, _ = sdf_net((origins[:, None, :] + dirs[:, None, :] * t[..., None]).reshape(-1, 3), with_gradient=False)
     w = composite_weights(sdf.reshape(R, -1), t, density)
     return (w * t).sum(-1) / (w.sum(-1) + 1e-8) * z_factor

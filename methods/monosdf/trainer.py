@@ -27,6 +27,7 @@ from bench.data.config import config_record
 from bench.data.scene import Scene
 from methods.base import Snapshot
 from methods.monosdf.config import MonoSDFConfig
+from methods.monosdf.error_bounded import error_bounded_samples
 from methods.monosdf.field import ColorNetwork, LaplaceDensity, SDFNetwork
 from methods.monosdf.grid import make_grid_spec
 from methods.monosdf.losses import color_loss, eikonal_loss, normal_loss, smoothness_loss, ssi_depth_fit, ssi_depth_fit_code
@@ -130,12 +131,29 @@ class MonoSDFTrainer:
                       t: torch.Tensor | None = None, prune_weight: float = 0.0, coarse_sdf: torch.Tensor | None = None) -> RenderOutput:
         """Render ``pixels`` (flat indices) of training view slot ``view`` (0..V-1; or an (R,) slot per ray)
         with that image's appearance code; ``extra_points`` (E, 3): also their SDF gradients
-        (``RenderOutput.extra_grad``); ``t``: distances from :func:`hierarchical_samples` (None = sample here)."""
+        (``RenderOutput.extra_grad``); ``t``: distances from :meth:`sample_rays` (None = sample here)."""
         r = self.rays
+        if t is None:
+            t = cast(torch.Tensor, self.sample_rays(r.origins[view].expand(len(pixels), 3), r.dirs[view, pixels], r.far[view, pixels], jitter))
         return render_rays(self.sdf, self.color, self.density, r.origins[view], r.dirs[view, pixels], r.z_factor[view, pixels],
                            r.far[view, pixels], r.world_to_cam_rot[view], self.cfg.near, self.cfg.n_coarse, self.cfg.n_fine,
                            self.gen, jitter, extra_points=extra_points, t=t, image=view, prune_weight=prune_weight,
                            coarse_sdf=coarse_sdf)
+
+    @torch.no_grad()
+    def sample_rays(self, origins: torch.Tensor, dirs: torch.Tensor, far: torch.Tensor, jitter: bool,
+                    with_coarse_sdf: bool = False) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
+        """Sample distances (R, S) along rays (origins, dirs: (R, 3); far: (R,)) with the configured sampler
+        (``sampler``: hierarchical | error_bounded); ``with_coarse_sdf``: also the (R, S) SDF the sampler
+        already evaluated there (NaN elsewhere). ``jitter``: training draws (False: deterministic)."""
+        cfg = self.cfg
+        gen = self.gen if jitter else None
+        if cfg.sampler == "error_bounded":
+            return error_bounded_samples(self.sdf, self.density, origins, dirs, far, cfg.near, cfg.eb_n_eval, cfg.eb_n_final,
+                                         cfg.eb_n_extra, cfg.eb_eps, cfg.eb_beta_iters, cfg.eb_max_rounds, gen, jitter,
+                                         with_coarse_sdf=with_coarse_sdf)
+        return hierarchical_samples(self.sdf, self.density, origins, dirs, far, cfg.near, cfg.n_coarse, cfg.n_fine, gen, jitter,
+                                    with_coarse_sdf=with_coarse_sdf)
 
     def _set_levels(self) -> None:
         """Coarse-to-fine grid (``grid_levels_initial`` < ``grid_levels``): start with that many levels and
@@ -257,8 +275,7 @@ class MonoSDFTrainer:
         # prune only while the last step left enough weightless samples to pay for the no-gradient pass
         prune = self.prune_weight if self._prunable_frac <= PRUNE_WORTH else 0.0
         with record_function("step.sampler"):  # phase labels: what torch.profiler shows per phase (no cost without a profiler)
-            sampled = hierarchical_samples(self.sdf, self.density, origins, dirs, r.far[slot, pixels], cfg.near, cfg.n_coarse,
-                                           cfg.n_fine, self.gen, True, with_coarse_sdf=prune > 0)
+            sampled = self.sample_rays(origins, dirs, r.far[slot, pixels], True, with_coarse_sdf=prune > 0)
         t, coarse_sdf = (cast("tuple[torch.Tensor, torch.Tensor]", sampled) if prune > 0
                          else (cast(torch.Tensor, sampled), None))  # coarse_sdf: the sampler's SDF, reused by the pruning pass
         # eikonal points (MonoSDF): R uniform points in the bounding cube + one sample of each ray
@@ -322,7 +339,7 @@ class MonoSDFTrainer:
         if self.prune_weight > 0:
             self._prunable_frac = float((out.weights.detach() > self.prune_weight).float().mean())
         stats = {"samples_weighted": float((out.weights.detach() > WEIGHTED_SAMPLE).sum(-1).float().mean()),
-                 "samples_rendered": out.kept / R}  # per ray, with gradients (n_coarse + n_fine unless pruned)
+                 "samples_rendered": out.kept / R}  # per ray, with gradients (cfg.samples_per_ray() unless pruned)
         total = abs(logs["loss"])
         for name, (wt, _) in terms.items():  # each weighted term's share of the total loss
             stats[f"share_{name}"] = wt * logs[name] / total if total > 0 else 0.0
@@ -436,15 +453,19 @@ class MonoSDFTrainer:
     @torch.no_grad()
     def render_view_depth(self, view: int, stride: int = 1, chunk: int = 4096, n_coarse: int | None = None) -> np.ndarray:
         """z-depth in metres of training slot ``view`` at every ``stride``-th pixel -> (ceil(H/stride), ceil(W/stride));
-        ``n_coarse`` overrides the sampler's coarse samples (a denser reference for the diagnostics)."""
+        ``n_coarse`` overrides the sampler's coarse samples (a denser reference for the diagnostics: always the
+        hierarchical sampler with 8x its coarse samples); None = the configured sampler."""
         H, W = self.scene.height, self.scene.width
         rows, cols = np.arange(0, H, stride), np.arange(0, W, stride)
         pix = torch.from_numpy((rows[:, None] * W + cols[None, :]).reshape(-1))
         r, depth = self.rays, []
         for s in range(0, len(pix), chunk):
             p = pix[s : s + chunk]
+            t = None
+            if n_coarse is None and self.cfg.sampler != "hierarchical":
+                t = cast(torch.Tensor, self.sample_rays(r.origins[view].expand(len(p), 3), r.dirs[view, p], r.far[view, p], False))
             depth.append(render_depth(self.sdf, self.density, r.origins[view], r.dirs[view, p], r.z_factor[view, p], r.far[view, p],
-                                      self.cfg.near, int(n_coarse or self.cfg.n_coarse), self.cfg.n_fine))
+                                      self.cfg.near, int(n_coarse or self.cfg.n_coarse), self.cfg.n_fine, t=t))
         return (torch.cat(depth) * r.scale).reshape(len(rows), len(cols)).numpy()
 
     # ------------------------------------------------------------------ checkpoints
