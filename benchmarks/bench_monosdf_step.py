@@ -31,8 +31,8 @@ from bench.data.datasets import load_dataset
 from methods.monosdf.trainer import MonoSDFTrainer
 from methods.registry import typed_method_config
 
-PHASES = ("step.sampler", "step.render", "render.prune_pass", "render.sdf_with_gradient", "render.color",
-          "step.backward", "step.optimizer")  # the record_function labels of MonoSDFTrainer.step / render_rays
+PHASES = ("step.sampler", "sampler.sdf", "step.render", "render.prune_pass", "render.sdf_with_gradient", "render.color",
+          "step.backward", "step.optimizer")  # the record_function labels of MonoSDFTrainer.step / render_rays / the samplers (sampler.sdf: inside step.sampler)
 
 
 class PhaseClock:
@@ -57,11 +57,12 @@ def time_phases(trainer: MonoSDFTrainer, steps: int, clock: Callable[[], float])
     """Run ``steps`` more steps with :class:`PhaseClock` in place of the modules' ``record_function`` and
     print ms per step and % of the step per phase (inclusive; ``render.*`` lie inside ``step.render``; the
     rest of a step is the loss terms and bookkeeping)."""
+    import methods.monosdf.error_bounded as error_bounded_mod
     import methods.monosdf.render as render_mod
     import methods.monosdf.trainer as trainer_mod
 
     phase = PhaseClock(clock)
-    modules = (render_mod, trainer_mod)
+    modules = (error_bounded_mod, render_mod, trainer_mod)
     saved = [m.record_function for m in modules]
     for m in modules:
         setattr(m, "record_function", phase)
@@ -73,7 +74,7 @@ def time_phases(trainer: MonoSDFTrainer, steps: int, clock: Callable[[], float])
     finally:
         for m, original in zip(modules, saved):
             setattr(m, "record_function", original)
-    print(f"phases over {steps} steps ({total * 1000:.1f} ms per step; inclusive, render.* inside step.render):")
+    print(f"phases over {steps} steps ({total * 1000:.1f} ms per step; inclusive, render.* inside step.render, sampler.* inside step.sampler):")
     for name in PHASES:
         if name in phase.seconds:
             ms = phase.seconds[name] * 1000.0 / steps

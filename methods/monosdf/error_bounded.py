@@ -25,6 +25,7 @@ import math
 from typing import Literal, overload
 
 import torch
+from torch.profiler import record_function
 
 from methods.monosdf.field import LaplaceDensity, SDFNetwork
 
@@ -161,7 +162,8 @@ def error_bounded_samples(
 
     def sdf_at(tt: torch.Tensor) -> torch.Tensor:
         pts = origins[:, None, :] + dirs[:, None, :] * tt[..., None]
-        return sdf_net(pts.reshape(-1, 3), with_gradient=False)[0].reshape(tt.shape)
+        with record_function("sampler.sdf"):
+            return sdf_net(pts.reshape(-1, 3), with_gradient=False)[0].reshape(tt.shape)
 
     sdf = sdf_at(z)
     final = z

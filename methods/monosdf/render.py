@@ -132,7 +132,8 @@ def hierarchical_samples(
     far_t = torch.maximum(far, near_t + 1e-3)
     t_c = _stratified(near_t, far_t, n_coarse, gen, jitter)
     pts = origins[:, None, :] + dirs[:, None, :] * t_c[..., None]
-    sdf_c, _, _ = sdf_net(pts.reshape(-1, 3), with_gradient=False)
+    with record_function("sampler.sdf"):
+        sdf_c, _, _ = sdf_net(pts.reshape(-1, 3), with_gradient=False)
     w_c = composite_weights(sdf_c.reshape(R, n_coarse), t_c, density)
     mids = 0.5 * (t_c[:, 1:] + t_c[:, :-1])
     bins = torch.cat([near_t[:, None], mids, far_t[:, None]], -1)
