@@ -72,6 +72,9 @@ def main() -> None:
     ap.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE")
     args = ap.parse_args()
 
+    cfg = typed_method_config("monosdf", args.scale, parse_overrides(args.set))
+    if cfg.sampler != "hierarchical":  # refuse before any measurement
+        raise SystemExit(f"bench_limits counts the FLOPs of the hierarchical sampler only (sampler: {cfg.sampler})")
     peaks = {}
     for threads in sorted({1, args.threads}):
         peaks[threads] = (matmul_gflops(2048, 2048, 2048, threads, 5), matmul_gflops(32768, 32, 32, threads))
@@ -80,7 +83,6 @@ def main() -> None:
 
     torch.set_num_threads(args.threads)
     scene = load_dataset(args.scene, args.scale)
-    cfg = typed_method_config("monosdf", args.scale, parse_overrides(args.set))
     trainer = MonoSDFTrainer(scene, cfg, seed=0)
     for _ in range(max(args.train, 3)):
         trainer.step()
@@ -93,8 +95,6 @@ def main() -> None:
         times.append(time.perf_counter() - t)
     step_s = statistics.median(times)
 
-    if cfg.sampler != "hierarchical":
-        raise SystemExit(f"bench_limits counts the FLOPs of the hierarchical sampler only (sampler: {cfg.sampler})")
     counter = FlopCounterMode(display=False)
     with counter:
         trainer.step()

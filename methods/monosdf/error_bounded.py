@@ -28,6 +28,7 @@ import torch
 from torch.profiler import record_function
 
 from methods.monosdf.field import LaplaceDensity, SDFNetwork
+from methods.monosdf.render import weights_and_transmittance
 
 BOUND_CLAMP = 1e6  # VolSDF / MonoSDF: exp(error integral) is clamped here (no inf in the bound)
 ERROR_PDF_FLOOR = 1e-6  # MonoSDF's add_tiny for the error-bound pdf of the upsampling rounds
@@ -67,6 +68,12 @@ def _error_integral(beta: torch.Tensor, d_star: torch.Tensor, dists: torch.Tenso
     return torch.cumsum(torch.exp(-d_star / beta) * dists * dists / (4.0 * beta * beta), dim=-1)
 
 
+def _bound_opacity(beta: torch.Tensor, d_star: torch.Tensor, dists: torch.Tensor, trans: torch.Tensor) -> torch.Tensor:
+    """(R, N-1) bound on the opacity error at each interval's end: ``(exp(E_i) - 1) * T_i`` (exp clamped at
+    1e6), T_i (R, N-1) the estimated transmittance at the interval's start."""
+    return (torch.exp(_error_integral(beta, d_star, dists)).clamp(max=BOUND_CLAMP) - 1.0) * trans
+
+
 def opacity_error_bound(beta: torch.Tensor, sdf: torch.Tensor, t: torch.Tensor, d_star: torch.Tensor,
                         density: LaplaceDensity) -> torch.Tensor:
     """The largest bound along each ray on the error of the estimated opacity, for density scale ``beta``.
@@ -82,8 +89,7 @@ def opacity_error_bound(beta: torch.Tensor, sdf: torch.Tensor, t: torch.Tensor, 
     dists = t[:, 1:] - t[:, :-1]
     sigma = density(sdf, beta)
     free = torch.cumsum(torch.cat([torch.zeros_like(dists[:, :1]), dists * sigma[:, :-1]], dim=-1), dim=-1)
-    bound = (torch.exp(_error_integral(beta, d_star, dists)).clamp(max=BOUND_CLAMP) - 1.0) * torch.exp(-free[:, :-1])
-    return bound.max(-1).values
+    return _bound_opacity(beta, d_star, dists, torch.exp(-free[:, :-1])).max(-1).values
 
 
 def _invert_cdf(bins: torch.Tensor, pdf: torch.Tensor, n: int, gen: torch.Generator | None, random: bool) -> torch.Tensor:
@@ -101,15 +107,6 @@ def _invert_cdf(bins: torch.Tensor, pdf: torch.Tensor, n: int, gen: torch.Genera
     denom = c1 - c0
     denom = torch.where(denom < 1e-5, torch.ones_like(denom), denom)
     return b0 + (u - c0) / denom * (b1 - b0)
-
-
-def _weights(sdf: torch.Tensor, t: torch.Tensor, density: LaplaceDensity, beta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """VolSDF weights (R, N) and transmittance (R, N) under per-ray ``beta`` (R, 1); last interval 1e10."""
-    sigma = density(sdf, beta)
-    dists = torch.cat([t[:, 1:] - t[:, :-1], torch.full_like(t[:, :1], 1e10)], -1)
-    free = dists * sigma
-    trans = torch.exp(-torch.cumsum(torch.cat([torch.zeros_like(free[:, :1]), free[:, :-1]], -1), -1))
-    return (1.0 - torch.exp(-free)) * trans, trans
 
 
 @overload
@@ -157,8 +154,8 @@ def error_bounded_samples(
     beta0 = density.beta().detach()
     u = (torch.arange(n_eval, dtype=torch.float32) + (torch.rand(R, n_eval, generator=gen) if jitter else 0.5)) / n_eval
     z = near_t[:, None] + (far_t - near_t)[:, None] * u  # (R, n_eval) stratified
-    dists = z[:, 1:] - z[:, :-1]
-    beta = torch.sqrt((dists * dists).sum(-1) / (4.0 * math.log(1.0 + eps)))  # (R,) VolSDF Lemma 2: bound <= eps at this beta
+    gaps = z[:, 1:] - z[:, :-1]
+    beta = torch.sqrt((gaps * gaps).sum(-1) / (4.0 * math.log(1.0 + eps)))  # (R,) VolSDF Lemma 2: bound <= eps at this beta
 
     def sdf_at(tt: torch.Tensor) -> torch.Tensor:
         pts = origins[:, None, :] + dirs[:, None, :] * tt[..., None]
@@ -177,11 +174,9 @@ def error_bounded_samples(
             hi = torch.where(ok, mid, hi)
             lo = torch.where(ok, lo, mid)
         beta = hi
-        weights, trans = _weights(sdf, z, density, beta[:, None])
+        weights, trans = weights_and_transmittance(sdf, z, density, beta[:, None])
         if bool(beta.max() > beta0) and round_ < max_rounds:  # upsample where the error bound is largest
-            dists = z[:, 1:] - z[:, :-1]
-            bound = (torch.exp(_error_integral(beta[:, None], d_star, dists)).clamp(max=BOUND_CLAMP) - 1.0) * trans[:, :-1]
-            pdf = bound + ERROR_PDF_FLOOR
+            pdf = _bound_opacity(beta[:, None], d_star, z[:, 1:] - z[:, :-1], trans[:, :-1]) + ERROR_PDF_FLOOR
             new = _invert_cdf(z, pdf / pdf.sum(-1, keepdim=True), n_eval, gen, random=False)
             z, order = torch.sort(torch.cat([z, new], -1), -1)
             sdf = torch.gather(torch.cat([sdf, sdf_at(new)], -1), 1, order)

@@ -54,20 +54,27 @@ class RenderOutput:
                             weights=self.weights[rows], grad=self.grad[rows], sdf=self.sdf[rows], t=self.t[rows])
 
 
-def composite_weights(sdf: torch.Tensor, t: torch.Tensor, density: LaplaceDensity, beta: torch.Tensor | None = None) -> torch.Tensor:
-    """VolSDF weights ``w_i = T_i (1 - exp(-sigma_i delta_i))`` along rays.
+def weights_and_transmittance(sdf: torch.Tensor, t: torch.Tensor, density: LaplaceDensity,
+                              beta: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    """VolSDF weights ``w_i = T_i (1 - exp(-sigma_i delta_i))`` and transmittances ``T_i`` along rays.
 
     Args:
-        sdf: (R, S) SDF at the samples; t: (R, S) sorted distances along unit rays.
+        sdf: (R, S) SDF at the samples; t: (R, S) sorted distances along unit rays; beta: None (the
+            density's own), a scalar tensor or (R, 1) per ray.
 
     Returns:
-        (R, S) weights (the last interval extends 1e10, i.e. the ray is absorbed).
+        (R, S) weights (the last interval extends 1e10, i.e. the ray is absorbed) and (R, S) T_i.
     """
     sigma = density(sdf, beta)
     delta = torch.cat([t[:, 1:] - t[:, :-1], torch.full_like(t[:, :1], 1e10)], dim=1)
     free = sigma * delta
     trans = torch.exp(-torch.cumsum(torch.cat([torch.zeros_like(free[:, :1]), free[:, :-1]], dim=1), dim=1))
-    return trans * (1.0 - torch.exp(-free))
+    return trans * (1.0 - torch.exp(-free)), trans
+
+
+def composite_weights(sdf: torch.Tensor, t: torch.Tensor, density: LaplaceDensity, beta: torch.Tensor | None = None) -> torch.Tensor:
+    """The (R, S) weights of :func:`weights_and_transmittance`."""
+    return weights_and_transmittance(sdf, t, density, beta)[0]
 
 
 def _stratified(near: torch.Tensor, far: torch.Tensor, n: int, gen: torch.Generator | None, jitter: bool) -> torch.Tensor:

@@ -461,9 +461,8 @@ class MonoSDFTrainer:
         r, depth = self.rays, []
         for s in range(0, len(pix), chunk):
             p = pix[s : s + chunk]
-            t = None
-            if n_coarse is None and self.cfg.sampler != "hierarchical":
-                t = cast(torch.Tensor, self.sample_rays(r.origins[view].expand(len(p), 3), r.dirs[view, p], r.far[view, p], False))
+            t = None if n_coarse is not None else cast(
+                torch.Tensor, self.sample_rays(r.origins[view].expand(len(p), 3), r.dirs[view, p], r.far[view, p], False))
             depth.append(render_depth(self.sdf, self.density, r.origins[view], r.dirs[view, p], r.z_factor[view, p], r.far[view, p],
                                       self.cfg.near, int(n_coarse or self.cfg.n_coarse), self.cfg.n_fine, t=t))
         return (torch.cat(depth) * r.scale).reshape(len(rows), len(cols)).numpy()
