@@ -72,6 +72,9 @@ def cmd_list(args: argparse.Namespace) -> int:
     for p in sorted(SCENES_DIR.glob("*.yaml")):
         r = load_recipe(p)
         print(f"  {r.name:20s} {r.kind:8s} {r.format}")
+    from bench.mkl_dispatch import blas_path, mkl_code_path
+
+    print(f"matrix products: MKL {mkl_code_path()} path (blas: {blas_path()}; bench/mkl_dispatch.py)")
     return 0
 
 
@@ -398,8 +401,12 @@ def _interrupt_on_sigterm() -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    if argv is None:  # the console script, not a test calling main([...]): MKL's AVX-512 path on a non-Intel CPU
+        from bench.mkl_dispatch import reexec_with_mkl_shim
+
+        reexec_with_mkl_shim()  # re-executes this command once with the shim preloaded, or returns
     args = build_parser().parse_args(argv)
-    if argv is None:  # the console script, not a test calling main([...])
+    if argv is None:
         _interrupt_on_sigterm()
     try:
         return int(args.func(args) or 0)

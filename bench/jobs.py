@@ -6,7 +6,7 @@ job's result is one JSON row (schema :data:`RESULT_SCHEMA`): :func:`row_head`'s 
 ``status`` ("ok" | "failed"), ``metrics`` (the final snapshot's), ``curve`` (every snapshot:
 ``fraction``, ``iterations``, ``seconds``, ``metrics``, ``diagnostics``), ``iterations``, ``timings``
 (wall seconds per stage) and, when failed, ``error`` (``type``, ``message``, ``traceback``). Executors
-add ``attempts``, ``wall_seconds``, ``worker_name``, ``executor`` and ``torch_threads``.
+add ``attempts``, ``wall_seconds``, ``worker_name``, ``executor``, ``torch_threads`` and ``blas`` (the matrix-product code path, :mod:`bench.mkl_dispatch`).
 
 Imports nothing of the harness but the package version (layering: ``tests/test_architecture.py``).
 """

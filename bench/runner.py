@@ -10,7 +10,7 @@ Where jobs run is an executor's business (``bench/executors/``: a local process 
 distributed for clusters); :func:`run_jobs` hands it the jobs still to do and writes each row as it
 arrives. Besides the schema-1 fields of :func:`bench.execute.run_job` (:mod:`bench.jobs`), rows from :func:`run_jobs` carry
 ``attempts`` (1 unless a worker died), ``wall_seconds`` (on the worker, dataset preparation included),
-``worker_name``, ``executor`` and ``torch_threads``.
+``worker_name``, ``executor``, ``torch_threads`` and ``blas`` (the matrix-product code path, :mod:`bench.mkl_dispatch`).
 """
 
 from __future__ import annotations
@@ -36,7 +36,11 @@ def job_id_for(plan: JobPlan, config: dict[str, Any], threads: int | None = None
     """Stable 16-hex id of a job (see module docstring for what it covers). ``threads``: the torch threads
     the job will run with, when the executor knows it (results differ by up to ~0.003 F between thread
     counts: float sums in another order), so a row computed with another count is not silently reused;
-    without it, the *base id* that tables and reports match results by."""
+    without it, the *base id* that tables and reports match results by. With ``threads`` the id also
+    covers this process's matrix-product code path (:func:`bench.mkl_dispatch.blas_path`, which the
+    local executor's workers inherit) when it is not the default one, for the same reason."""
+    from bench.mkl_dispatch import blas_path
+
     key = {
         "method": plan.method,
         "config": identity_config(plan.method, config),
@@ -49,6 +53,8 @@ def job_id_for(plan: JobPlan, config: dict[str, Any], threads: int | None = None
     }
     if threads is not None:
         key["torch_threads"] = int(threads)
+        if (blas := blas_path()) != "default":
+            key["blas"] = blas
     return hashlib.sha256(json.dumps(key, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 

@@ -18,7 +18,7 @@ lost, and a rerun skips it. Contract of :meth:`Executor.run`:
 Every job runs through :func:`execute_job` on the worker: it sets torch's thread count to the worker's
 share of the machine's cores (so two jobs on two cores do not oversubscribe), synthesises the job's
 dataset under a per-dataset file lock (workers share the dataset cache), runs the job and adds
-``attempts``, ``wall_seconds``, ``worker_name``, ``executor`` and ``torch_threads`` to the row.
+``attempts``, ``wall_seconds``, ``worker_name``, ``executor``, ``torch_threads`` and ``blas`` (:func:`bench.mkl_dispatch.blas_path`) to the row.
 
 Implementations: :class:`bench.executors.local.LocalExecutor` (process pool, the default) and
 :class:`bench.executors.dask.DaskExecutor` (Dask distributed).
@@ -221,8 +221,10 @@ def execute_job(job: "Job", cache_dir: Path | None, attempt: int = 1, threads: i
         row = failure_row(job, type(exc).__name__, str(exc), traceback.format_exc())
     else:
         row = run_job(job, cache_dir, progress)
+    from bench.mkl_dispatch import blas_path
+
     row.update(attempts=attempt, wall_seconds=time.perf_counter() - t0, worker_name=name, executor=kind,
-               torch_threads=threads)
+               torch_threads=threads, blas=blas_path())
     return row
 
 
@@ -230,6 +232,6 @@ def lost_row(job: "Job", attempts: int, message: str, executor: str, detail: str
     """The failure row of a job whose worker died ``attempts`` times (retries exhausted)."""
     text = f"the worker running this job died {attempts} time(s) (retries exhausted): {message}"
     row = failure_row(job, WORKER_LOST, text, detail or text)
-    row.update(attempts=attempts, wall_seconds=None, worker_name=None, executor=executor, torch_threads=None,
+    row.update(attempts=attempts, wall_seconds=None, worker_name=None, executor=executor, torch_threads=None, blas=None,
                created=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))
     return row
