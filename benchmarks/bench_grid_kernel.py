@@ -1,6 +1,7 @@
-"""Benchmark: the C++ feature-grid kernel alone (forward with the Jacobian, and its backward), on points laid
+"""Benchmark: the C++ feature-grid kernels alone (forward with the Jacobian, and its backward), on points laid
 out like a training step's (``--rays`` rays from one camera, ``--samples`` sorted samples each, ray-major),
-and on the same points shuffled (no spatial coherence), beside the PyTorch reference path.
+and on the same points shuffled (no spatial coherence): the AVX-512 kernels (the default where compiled), the
+per-point kernels (their twin) and, with ``--reference``, the PyTorch reference path.
 
 Usage:
     .venv/bin/python benchmarks/bench_grid_kernel.py [--threads 1] [--rays 512] [--samples 67] [--repeat 20]
@@ -12,12 +13,13 @@ an idle machine: the kernel is memory-bound and its figures swing 2x when other 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import statistics
 import time
 
 import torch
 
-from methods.monosdf.grid import FeatureGrid, interpolate_fast, interpolate_reference, make_grid_spec
+from methods.monosdf.grid import FeatureGrid, interpolate_fast, interpolate_reference, make_grid_spec, per_point_grid_kernel, simd_kernel_compiled
 
 
 def ray_points(rays: int, samples: int, seed: int = 0) -> torch.Tensor:
@@ -55,7 +57,8 @@ def main() -> None:
     grid = FeatureGrid(spec, init_scale=0.1)
     coherent = ray_points(args.rays, args.samples)
     shuffled = coherent[torch.randperm(coherent.shape[0], generator=torch.Generator().manual_seed(1))].contiguous()
-    paths = [("C++", interpolate_fast)] + ([("PyTorch", interpolate_reference)] if args.reference else [])
+    paths = ([("AVX-512", interpolate_fast)] if simd_kernel_compiled() else []) + [("per-point", interpolate_fast)] \
+        + ([("PyTorch", interpolate_reference)] if args.reference else [])
     print(f"{coherent.shape[0]} points, {args.threads} thread(s), process CPU time (median of {args.repeat})")
     for layout, x in (("ray-major", coherent), ("shuffled", shuffled)):
         for name, fn in paths:
@@ -68,8 +71,9 @@ def main() -> None:
                 grid.table.grad = None
                 (feat.sum() + jac.sum()).backward()
 
-            f, fb = timed(fwd, args.repeat), timed(fwd_bwd, args.repeat)
-            print(f"{layout:9s} {name:7s}: forward + Jacobian {1000 * f:6.2f} ms, with backward {1000 * fb:6.2f} ms "
+            with per_point_grid_kernel() if name == "per-point" else contextlib.nullcontext():
+                f, fb = timed(fwd, args.repeat), timed(fwd_bwd, args.repeat)
+            print(f"{layout:9s} {name:9s}: forward + Jacobian {1000 * f:6.2f} ms, with backward {1000 * fb:6.2f} ms "
                   f"({x.shape[0] / fb / 1e6:.2f} M points/s)")
 
 

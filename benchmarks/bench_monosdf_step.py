@@ -6,7 +6,7 @@ and a per-op breakdown from torch.profiler.
 
 Usage:
     .venv/bin/python benchmarks/bench_monosdf_step.py [--scene scannet_like_0] [--scale small] [--steps 20]
-        [--rays 512] [--reference-grid] [--threads 2] [--no-profile] [--set prune_weight=1e-4]
+        [--rays 512] [--reference-grid | --per-point-grid] [--threads 2] [--no-profile] [--set prune_weight=1e-4]
         [--train 2000 --checkpoint /tmp/monosdf_2000.pt] [--cpu-time] [--phases]
 
 ``--train N`` times the step at a late point of a schedule (beta small, most samples weightless: where
@@ -94,6 +94,7 @@ def main() -> None:
     ap.add_argument("--rays", type=int, default=None)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--reference-grid", action="store_true", help="pure-PyTorch grid instead of the C++ kernel")
+    ap.add_argument("--per-point-grid", action="store_true", help="the C++ kernel's per-point grid kernels instead of its AVX-512 ones")
     ap.add_argument("--no-profile", action="store_true")
     ap.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE", help="config overrides (YAML values), e.g. pe_frequencies=0")
     ap.add_argument("--train", type=int, default=0, help="train this many steps first (a late point of the schedule)")
@@ -104,6 +105,10 @@ def main() -> None:
     args = ap.parse_args()
 
     torch.set_num_threads(args.threads)
+    if args.per_point_grid:
+        from methods.monosdf.grid import per_point_grid_kernel
+
+        per_point_grid_kernel().__enter__()  # for the whole process
     scene = load_dataset(args.scene, args.scale)
     overrides = {"fast_grid": not args.reference_grid}
     if args.rays:
@@ -138,7 +143,10 @@ def main() -> None:
     print(f"samples rendered with gradients per ray (timed steps): {rendered:.1f} of {cfg.samples_per_ray()}"
           f" ({'cpu' if args.cpu_time else 'wall'} time below)")
     med, best = statistics.median(times), min(times)
-    print(f"grid: {'reference (PyTorch)' if args.reference_grid else 'C++ kernel'}, threads {args.threads}, "
+    from methods.monosdf.grid import simd_kernel_compiled
+
+    kernel = "reference (PyTorch)" if args.reference_grid else ("C++ per-point" if args.per_point_grid or not simd_kernel_compiled() else "C++ AVX-512")
+    print(f"grid: {kernel}, threads {args.threads}, "
           f"{cfg.rays_per_batch} rays x {cfg.samples_per_ray()} samples = {samples} samples/step")
     print(f"step time: median {med * 1000:.1f} ms, best {best * 1000:.1f} ms")
     print(f"throughput: median {samples / med / 1e6:.3f} M samples/s, best {samples / best / 1e6:.3f} M samples/s")

@@ -3,18 +3,30 @@
 // x: (P, 3) float32 in [-1, 1]; meta: (L, 4) int64 rows [resolution, offset, size, hashed];
 // table: (rows, F) float32. feat: (P, L*F); jac: (P, 3, L*F) = d feat / d x.
 //
-// Speed notes (benchmarks/bench_grid_kernel.py measures them): levels are the OUTER loop, so one
-// level's slice of the table (<= 2^log2_table rows) stays in the core's L2 cache while all points
-// visit it; the hash is computed in uint32 (its low bits equal the int64 reference's, since the table
-// size is a power of two <= 2^32) from per-axis terms, 6 multiplies per cell instead of 24; the
-// feature count is a template parameter for the common sizes so the inner loops unroll.
+// Two implementations of the same contract (benchmarks/bench_grid_kernel.py times both):
+// * AVX-512 (where compiled with -march=native on a CPU that has it; the default then, session 20): 16 points
+//   per instruction (cell arithmetic, hash, gathers of the table rows), every level of a block of 16 points
+//   before the next block, so each point's output rows are written whole; the backward computes the 16
+//   points' contributions at once and adds them to the thread's table copy point by point. 3.7x the per-point
+//   forward with the Jacobian, ~2x its backward (README, speed).
+// * per point (the twin the tests compare it with; set_simd_kernel(false)): levels are the OUTER loop, so one
+//   level's slice of the table (<= 2^log2_table rows) stays in the core's L2 cache while all points visit it.
+// Both compute the hash in uint32 (its low bits equal the int64 reference's, since the table size is a power
+// of two <= 2^32) from per-axis terms, 6 multiplies per cell instead of 24; the feature count is a template
+// parameter for the common sizes so the inner loops unroll (the AVX-512 kernels exist for those sizes: 1, 2, 4).
 #include <torch/extension.h>
 #include <cmath>
+#include <algorithm>
 #include <cstdint>
 #include <vector>
 #include <omp.h>
+#ifdef __AVX512F__
+#include <immintrin.h>
+#endif
 
 namespace {
+
+bool g_simd = true;  // the AVX-512 kernels (forward_all_avx512 / backward_all_avx512) where compiled; false: the per-point ones (twin)
 
 struct Level {
     int64_t res, offset, size;
@@ -110,6 +122,211 @@ void forward_level(const float* tp, const float* xp, const Level& lv, int64_t l,
     }
 }
 
+#ifdef __AVX512F__
+// The same forward for 16 points at a time with AVX-512 (compiled with -march=native on a CPU that has it):
+// the cell arithmetic, the hash and the table reads (gathers) of 16 points per instruction instead of one,
+// every level of a block of points before the next block, so each point's output rows are written whole
+// (feat: C floats, jac: 3 x C) instead of two columns per level pass. Per point the arithmetic is the
+// scalar kernel's, in its order (weights (wx wy) wz, corners summed 0..7): the results agree to float
+// rounding (fused multiply-adds); tests/methods/test_monosdf.py compares both kernels with the PyTorch
+// reference and with each other. set_simd_kernel(false) selects the per-point kernels.
+constexpr int SIMD_B = 16;
+
+// The cell of 16 points at one level: per-axis corner index terms (hashed or dense), fractions and weights;
+// corner(k) gives corner k's table rows (relative to the level's offset), weight and d weight / d x.
+template <bool HASHED>
+struct CellSimd {
+    __m512 fr[3], w0[3];
+    __m512i i0[3], i1[3];
+    __m512i mask;
+    float half_res;
+
+    CellSimd(const __m512 (&xb)[3], const Level& lv) {
+        const __m512 res = _mm512_set1_ps((float)lv.res), res_m1 = _mm512_set1_ps((float)lv.res - 1.f);
+        const __m512 half = _mm512_set1_ps(0.5f), one = _mm512_set1_ps(1.f), minus_one = _mm512_set1_ps(-1.f);
+        const __m512 zero = _mm512_setzero_ps();
+        half_res = 0.5f * (float)lv.res;
+        for (int d = 0; d < 3; ++d) {
+            const __m512 xd = _mm512_min_ps(_mm512_max_ps(xb[d], minus_one), one);
+            const __m512 pos = _mm512_mul_ps(_mm512_mul_ps(_mm512_add_ps(xd, one), half), res);
+            const __m512 fl = _mm512_min_ps(_mm512_max_ps(_mm512_floor_ps(pos), zero), res_m1);
+            i0[d] = _mm512_cvttps_epi32(fl);
+            i1[d] = _mm512_add_epi32(i0[d], _mm512_set1_epi32(1));
+            fr[d] = _mm512_sub_ps(pos, fl);
+            w0[d] = _mm512_sub_ps(one, fr[d]);
+        }
+        if constexpr (HASHED) {  // per-axis hash terms (uint32 arithmetic: the low bits of the int64 reference's)
+            const __m512i h1 = _mm512_set1_epi32((int32_t)2654435761u), h2 = _mm512_set1_epi32((int32_t)805459861u);
+            i0[1] = _mm512_mullo_epi32(i0[1], h1); i1[1] = _mm512_mullo_epi32(i1[1], h1);
+            i0[2] = _mm512_mullo_epi32(i0[2], h2); i1[2] = _mm512_mullo_epi32(i1[2], h2);
+        } else {  // dense level: (res + 1)^3 <= the table size < 2^31
+            const __m512i n1 = _mm512_set1_epi32((int32_t)(lv.res + 1)), n2 = _mm512_set1_epi32((int32_t)((lv.res + 1) * (lv.res + 1)));
+            i0[1] = _mm512_mullo_epi32(i0[1], n1); i1[1] = _mm512_mullo_epi32(i1[1], n1);
+            i0[2] = _mm512_mullo_epi32(i0[2], n2); i1[2] = _mm512_mullo_epi32(i1[2], n2);
+        }
+        mask = _mm512_set1_epi32((int32_t)(uint32_t)(lv.size - 1));
+    }
+
+    template <bool NEED_DW>
+    inline void corner(int k, __m512i& local, __m512& w, __m512& d0, __m512& d1, __m512& d2) const {
+        const int cx = k & 1, cy = (k >> 1) & 1, cz = (k >> 2) & 1;
+        const __m512i ax = cx ? i1[0] : i0[0], ay = cy ? i1[1] : i0[1], az = cz ? i1[2] : i0[2];
+        if constexpr (HASHED) local = _mm512_and_si512(_mm512_xor_si512(_mm512_xor_si512(ax, ay), az), mask);
+        else local = _mm512_add_epi32(_mm512_add_epi32(ax, ay), az);
+        const __m512 wx = cx ? fr[0] : w0[0], wy = cy ? fr[1] : w0[1], wz = cz ? fr[2] : w0[2];
+        w = _mm512_mul_ps(_mm512_mul_ps(wx, wy), wz);
+        if constexpr (NEED_DW) {
+            d0 = _mm512_mul_ps(_mm512_mul_ps(_mm512_set1_ps(cx ? half_res : -half_res), wy), wz);
+            d1 = _mm512_mul_ps(_mm512_mul_ps(wx, _mm512_set1_ps(cy ? half_res : -half_res)), wz);
+            d2 = _mm512_mul_ps(_mm512_mul_ps(wx, wy), _mm512_set1_ps(cz ? half_res : -half_res));
+        }
+    }
+};
+
+// One level for the block: writes out[0][col][i] (features) and out[1..3][col][i] (Jacobian rows); out: (4, C, SIMD_B).
+template <int FT, bool WITH_JAC, bool HASHED>
+inline void block_level_avx512(const float* tp, const __m512 (&xb)[3], const Level& lv, int64_t l, float* out, int64_t C) {
+    const CellSimd<HASHED> cell(xb, lv);
+    const float* tl = tp + lv.offset * FT;  // this level's rows
+    const __m512 zero = _mm512_setzero_ps();
+    __m512 acc[FT], a0[FT], a1[FT], a2[FT];
+    for (int ff = 0; ff < FT; ++ff) acc[ff] = a0[ff] = a1[ff] = a2[ff] = zero;
+    for (int k = 0; k < 8; ++k) {
+        __m512i local;
+        __m512 w, d0 = zero, d1 = zero, d2 = zero;
+        cell.template corner<WITH_JAC>(k, local, w, d0, d1, d2);
+        const __m512i base = FT == 1 ? local : _mm512_mullo_epi32(local, _mm512_set1_epi32(FT));
+        for (int ff = 0; ff < FT; ++ff) {
+            const __m512i idx = ff == 0 ? base : _mm512_add_epi32(base, _mm512_set1_epi32(ff));
+            const __m512 v = _mm512_i32gather_ps(idx, tl, 4);
+            acc[ff] = _mm512_fmadd_ps(w, v, acc[ff]);
+            if constexpr (WITH_JAC) {
+                a0[ff] = _mm512_fmadd_ps(d0, v, a0[ff]);
+                a1[ff] = _mm512_fmadd_ps(d1, v, a1[ff]);
+                a2[ff] = _mm512_fmadd_ps(d2, v, a2[ff]);
+            }
+        }
+    }
+    for (int ff = 0; ff < FT; ++ff) {
+        const int64_t col = l * FT + ff;
+        _mm512_store_ps(out + (0 * C + col) * SIMD_B, acc[ff]);
+        if constexpr (WITH_JAC) {
+            _mm512_store_ps(out + (1 * C + col) * SIMD_B, a0[ff]);
+            _mm512_store_ps(out + (2 * C + col) * SIMD_B, a1[ff]);
+            _mm512_store_ps(out + (3 * C + col) * SIMD_B, a2[ff]);
+        }
+    }
+}
+
+// Backward of one level for the block: g: (4, C, SIMD_B) incoming gradients (features; Jacobian rows), the
+// contributions w g + dw . gj computed for 16 points at once, then added to the thread's table copy point
+// by point (neighbouring points share corners, so the adds stay scalar and in point order).
+template <int FT, bool HAS_FEAT, bool HAS_JAC, bool HASHED>
+inline void block_level_backward_avx512(const float* g, const __m512 (&xb)[3], const Level& lv, int64_t l, int64_t C, int n, float* gt) {
+    const CellSimd<HASHED> cell(xb, lv);
+    float* gl = gt + lv.offset * FT;
+    const __m512 zero = _mm512_setzero_ps();
+    __m512 gfv[FT], g0[FT], g1[FT], g2[FT];
+    for (int ff = 0; ff < FT; ++ff) {
+        const int64_t col = l * FT + ff;
+        gfv[ff] = HAS_FEAT ? _mm512_load_ps(g + (0 * C + col) * SIMD_B) : zero;
+        g0[ff] = HAS_JAC ? _mm512_load_ps(g + (1 * C + col) * SIMD_B) : zero;
+        g1[ff] = HAS_JAC ? _mm512_load_ps(g + (2 * C + col) * SIMD_B) : zero;
+        g2[ff] = HAS_JAC ? _mm512_load_ps(g + (3 * C + col) * SIMD_B) : zero;
+    }
+    alignas(64) int32_t rows[8][SIMD_B];
+    alignas(64) float contrib[8][FT][SIMD_B];
+    for (int k = 0; k < 8; ++k) {
+        __m512i local;
+        __m512 w, d0 = zero, d1 = zero, d2 = zero;
+        cell.template corner<HAS_JAC>(k, local, w, d0, d1, d2);
+        for (int ff = 0; ff < FT; ++ff) {
+            __m512 v = HAS_FEAT ? _mm512_mul_ps(w, gfv[ff]) : zero;
+            if constexpr (HAS_JAC) {
+                v = _mm512_fmadd_ps(d0, g0[ff], v);
+                v = _mm512_fmadd_ps(d1, g1[ff], v);
+                v = _mm512_fmadd_ps(d2, g2[ff], v);
+            }
+            _mm512_store_ps(contrib[k][ff], v);
+        }
+        _mm512_store_si512(reinterpret_cast<__m512i*>(rows[k]), local);
+    }
+    // Point by point, its 8 corners in turn (the per-point kernel's order): consecutive points of a ray share
+    // corners, so corner-major order would chain dependent adds to one address back to back.
+    for (int i = 0; i < n; ++i)
+        for (int k = 0; k < 8; ++k)
+            for (int ff = 0; ff < FT; ++ff) gl[(int64_t)rows[k][i] * FT + ff] += contrib[k][ff][i];
+}
+
+template <int FT, bool HAS_FEAT, bool HAS_JAC>
+void backward_all_avx512(const float* gf, const float* gj, const float* xp, const int64_t* mp, int64_t L, int64_t P, int64_t rows, float* part) {
+    const int64_t C = L * FT;
+    const int64_t nblocks = (P + SIMD_B - 1) / SIMD_B;
+    std::vector<Level> levels;
+    for (int64_t l = 0; l < L; ++l) levels.push_back(level_of(mp, l));
+#pragma omp parallel
+    {
+        float* gt = part + (int64_t)omp_get_thread_num() * rows * FT;
+        std::vector<float> buf((size_t)(4 * C * SIMD_B) + 16, 0.f);
+        float* g = reinterpret_cast<float*>((reinterpret_cast<uintptr_t>(buf.data()) + 63) & ~uintptr_t(63));
+#pragma omp for schedule(static)
+        for (int64_t b = 0; b < nblocks; ++b) {
+            const int64_t p0 = b * SIMD_B;
+            const int n = (int)std::min<int64_t>(SIMD_B, P - p0);
+            alignas(64) float xs[3][SIMD_B];
+            for (int i = 0; i < SIMD_B; ++i) {  // the block's points and incoming gradients, transposed; padded with 0
+                const bool in = i < n;
+                const int64_t p = p0 + i;
+                for (int d = 0; d < 3; ++d) xs[d][i] = in ? xp[3 * p + d] : 0.f;
+                for (int64_t c = 0; c < C; ++c) {
+                    if (HAS_FEAT) g[c * SIMD_B + i] = in ? gf[p * C + c] : 0.f;
+                    if (HAS_JAC)
+                        for (int d = 0; d < 3; ++d) g[((1 + d) * C + c) * SIMD_B + i] = in ? gj[(p * 3 + d) * C + c] : 0.f;
+                }
+            }
+            const __m512 xb[3] = {_mm512_load_ps(xs[0]), _mm512_load_ps(xs[1]), _mm512_load_ps(xs[2])};
+            for (int64_t l = 0; l < L; ++l) {
+                if (levels[l].hashed) block_level_backward_avx512<FT, HAS_FEAT, HAS_JAC, true>(g, xb, levels[l], l, C, n, gt);
+                else block_level_backward_avx512<FT, HAS_FEAT, HAS_JAC, false>(g, xb, levels[l], l, C, n, gt);
+            }
+        }
+    }
+}
+
+template <int FT, bool WITH_JAC>
+void forward_all_avx512(const float* tp, const float* xp, const int64_t* mp, int64_t L, int64_t P, float* fp, float* jp) {
+    const int64_t C = L * FT;
+    const int64_t nblocks = (P + SIMD_B - 1) / SIMD_B;
+    std::vector<Level> levels;
+    for (int64_t l = 0; l < L; ++l) levels.push_back(level_of(mp, l));
+#pragma omp parallel
+    {
+        std::vector<float> buf((size_t)(4 * C * SIMD_B) + 16);
+        float* out = reinterpret_cast<float*>((reinterpret_cast<uintptr_t>(buf.data()) + 63) & ~uintptr_t(63));
+#pragma omp for schedule(static)
+        for (int64_t b = 0; b < nblocks; ++b) {
+            const int64_t p0 = b * SIMD_B;
+            const int n = (int)std::min<int64_t>(SIMD_B, P - p0);
+            alignas(64) float xs[3][SIMD_B];  // axis-major; a partial last block padded with 0
+            for (int i = 0; i < SIMD_B; ++i)
+                for (int d = 0; d < 3; ++d) xs[d][i] = i < n ? xp[3 * (p0 + i) + d] : 0.f;
+            const __m512 xb[3] = {_mm512_load_ps(xs[0]), _mm512_load_ps(xs[1]), _mm512_load_ps(xs[2])};
+            for (int64_t l = 0; l < L; ++l) {
+                if (levels[l].hashed) block_level_avx512<FT, WITH_JAC, true>(tp, xb, levels[l], l, out, C);
+                else block_level_avx512<FT, WITH_JAC, false>(tp, xb, levels[l], l, out, C);
+            }
+            for (int i = 0; i < n; ++i) {  // whole rows per point
+                const int64_t p = p0 + i;
+                for (int64_t c = 0; c < C; ++c) fp[p * C + c] = out[c * SIMD_B + i];
+                if constexpr (WITH_JAC)
+                    for (int d = 0; d < 3; ++d)
+                        for (int64_t c = 0; c < C; ++c) jp[(p * 3 + d) * C + c] = out[((1 + d) * C + c) * SIMD_B + i];
+            }
+        }
+    }
+}
+#endif
+
 // Backward for one level: each thread scatters into its own copy of the table gradient (no atomics).
 template <int FT, bool HAS_FEAT, bool HAS_JAC>
 void backward_level(const float* gf, const float* gj, const float* xp, const Level& lv, int64_t l, int64_t P, int64_t F_rt,
@@ -143,6 +360,15 @@ void backward_level(const float* gf, const float* gj, const float* xp, const Lev
 
 template <int FT>
 void forward_all(const float* tp, const float* xp, const int64_t* mp, int64_t L, int64_t P, int64_t F, bool with_jac, float* fp, float* jp) {
+#ifdef __AVX512F__
+    if constexpr (FT > 0) {
+        if (g_simd) {
+            if (with_jac) forward_all_avx512<FT, true>(tp, xp, mp, L, P, fp, jp);
+            else forward_all_avx512<FT, false>(tp, xp, mp, L, P, fp, jp);
+            return;
+        }
+    }
+#endif
     const int64_t C = L * F;
     for (int64_t l = 0; l < L; ++l) {
         const Level lv = level_of(mp, l);
@@ -153,6 +379,16 @@ void forward_all(const float* tp, const float* xp, const int64_t* mp, int64_t L,
 
 template <int FT>
 void backward_all(const float* gf, const float* gj, const float* xp, const int64_t* mp, int64_t L, int64_t P, int64_t F, int64_t rows, float* part) {
+#ifdef __AVX512F__
+    if constexpr (FT > 0) {
+        if (g_simd) {
+            if (gf && gj) backward_all_avx512<FT, true, true>(gf, gj, xp, mp, L, P, rows, part);
+            else if (gf) backward_all_avx512<FT, true, false>(gf, gj, xp, mp, L, P, rows, part);
+            else if (gj) backward_all_avx512<FT, false, true>(gf, gj, xp, mp, L, P, rows, part);
+            return;
+        }
+    }
+#endif
     const int64_t C = L * F;
     for (int64_t l = 0; l < L; ++l) {
         const Level lv = level_of(mp, l);
@@ -304,6 +540,14 @@ PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
     m.def("softplus_slope_forward", &softplus_slope_forward, "softplus(beta) and sigmoid(beta z)");
     m.def("softplus_slope_backward", &softplus_slope_backward, "fused backward of softplus_slope");
     m.def("forward", &grid_forward, "grid features + Jacobian");
+    m.def("set_simd_kernel", [](bool on) { g_simd = on; }, "the AVX-512 grid kernels (default where compiled) or the per-point ones");
+    m.def("simd_kernel_compiled", []() {
+#ifdef __AVX512F__
+        return true;
+#else
+        return false;
+#endif
+    }, "whether the AVX-512 grid kernels were compiled (-march=native on a CPU with AVX-512F)");
     m.def("backward", &grid_backward, "grid table gradient");
     m.def("jacobian_contract_forward", &jacobian_contract_forward, "sum_j J[p, d, j] g[p, j]");
     m.def("jacobian_contract_backward", &jacobian_contract_backward, "gradients of jacobian_contract_forward");

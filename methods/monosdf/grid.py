@@ -254,6 +254,27 @@ def fast_available() -> bool:
     return _load_extension() is not None
 
 
+def simd_kernel_compiled() -> bool:
+    """True if the C++ kernel was built with its AVX-512 grid kernels (``-march=native`` on a CPU with AVX-512F)."""
+    ext = _load_extension()
+    return ext is not None and bool(ext.simd_kernel_compiled())
+
+
+@contextlib.contextmanager
+def per_point_grid_kernel() -> Iterator[None]:
+    """Inside: the C++ kernel's per-point grid forward / backward (the twin of the AVX-512 ones, which are the
+    default where compiled). Process-wide; for tests and benchmarks."""
+    ext = _load_extension()
+    if ext is None:
+        yield
+        return
+    ext.set_simd_kernel(False)
+    try:
+        yield
+    finally:
+        ext.set_simd_kernel(True)
+
+
 def interpolate_fast(table: torch.Tensor, x: torch.Tensor, spec: GridSpec, with_jacobian: bool = True) -> tuple[torch.Tensor, torch.Tensor | None]:
     """Same contract as :func:`interpolate_reference`, through the C++ kernel (falls back if unavailable)."""
     if not fast_available() or table.dtype != torch.float32:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 import pytest
 import torch
@@ -16,6 +18,8 @@ from methods.monosdf.grid import (
     jacobian_contract,
     jacobian_contract_reference,
     make_grid_spec,
+    per_point_grid_kernel,
+    simd_kernel_compiled,
 )
 from methods.monosdf.losses import normal_loss, smoothness_loss, solve_scale_shift, ssi_depth_loss
 from methods.monosdf.render import composite_weights, sample_pdf
@@ -28,19 +32,52 @@ def _spec():
 
 # ----------------------------------------------------------------------------- grid: fast vs reference
 @pytest.mark.skipif(not fast_available(), reason="no C++ compiler")
-def test_grid_kernel_matches_reference_values_jacobian_and_table_gradient():
+@pytest.mark.parametrize("kernel", ["default", "per_point"])
+def test_grid_kernel_matches_reference_values_jacobian_and_table_gradient(kernel):
     spec = _spec()
     assert any(spec.hashed) and not all(spec.hashed)  # both dense and hashed levels are exercised
     grid = FeatureGrid(spec, init_scale=0.5, seed=1)
     x = torch.cat([torch.rand(3000, 3) * 2 - 1, torch.tensor([[1.0, 1.0, 1.0], [-1.0, -1.0, -1.0], [1.3, -2.0, 0.0]])])
     f_ref, j_ref = interpolate_reference(grid.table, x, spec)
-    f_fast, j_fast = interpolate_fast(grid.table, x, spec)
+    with per_point_grid_kernel() if kernel == "per_point" else contextlib.nullcontext():
+        f_fast, j_fast = interpolate_fast(grid.table, x, spec)
     torch.testing.assert_close(f_fast, f_ref, atol=1e-5, rtol=1e-5)
     torch.testing.assert_close(j_fast, j_ref, atol=1e-3, rtol=1e-4)
     gf, gj = torch.randn_like(f_ref), torch.randn_like(j_ref)
     g_ref = torch.autograd.grad((f_ref * gf).sum() + (j_ref * gj).sum(), grid.table)[0]
-    g_fast = torch.autograd.grad((f_fast * gf).sum() + (j_fast * gj).sum(), grid.table)[0]
+    with per_point_grid_kernel() if kernel == "per_point" else contextlib.nullcontext():
+        g_fast = torch.autograd.grad((f_fast * gf).sum() + (j_fast * gj).sum(), grid.table)[0]
     torch.testing.assert_close(g_fast, g_ref, atol=1e-3, rtol=1e-4)
+
+
+@pytest.mark.skipif(not simd_kernel_compiled(), reason="the AVX-512 grid kernels need a CPU with AVX-512F")
+@pytest.mark.parametrize("features", [1, 2, 4])
+@pytest.mark.parametrize("threads", [1, 2])
+def test_simd_grid_kernels_match_the_per_point_kernels(features, threads):
+    """The AVX-512 kernels against their per-point twin: features, Jacobian and the table gradient from the
+    features alone, the Jacobian alone and both, on a point count that leaves a partial block of 16, with points
+    outside the cube (clamped) and on its faces, for every templated feature count, at 1 and 2 threads."""
+    spec = make_grid_spec(levels=5, features_per_level=features, log2_table=12, base_resolution=4, max_resolution=40)
+    grid = FeatureGrid(spec, init_scale=0.5, seed=3)
+    g = torch.Generator().manual_seed(4)
+    x = torch.cat([torch.rand(1003, 3, generator=g) * 2.4 - 1.2, torch.tensor([[1.0, 1.0, 1.0], [-1.0, -1.0, -1.0], [0.0, 1.0, -1.0]])])
+    gf = torch.randn(x.shape[0], spec.levels * features, generator=g)
+    gj = torch.randn(x.shape[0], 3, spec.levels * features, generator=g)
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        out = {}
+        for kernel in ("simd", "per_point"):
+            with per_point_grid_kernel() if kernel == "per_point" else contextlib.nullcontext():
+                f, j = interpolate_fast(grid.table, x, spec)
+                f_only, _ = interpolate_fast(grid.table, x, spec, with_jacobian=False)
+                grads = [torch.autograd.grad(loss, grid.table, retain_graph=True)[0] for loss in
+                         ((f * gf).sum(), (j * gj).sum(), (f * gf).sum() + (j * gj).sum())]
+            out[kernel] = (f, j, f_only, *grads)
+    finally:
+        torch.set_num_threads(before)
+    for a, b in zip(out["simd"], out["per_point"]):
+        torch.testing.assert_close(a, b, atol=1e-5 * float(b.abs().max()), rtol=1e-5)
 
 
 @pytest.mark.skipif(not fast_available(), reason="no C++ compiler")
