@@ -133,3 +133,19 @@ def test_the_blas_path_enters_the_full_job_id_only_when_not_the_default(monkeypa
     monkeypatch.setattr(md, "blas_path", lambda: "mkl-avx512-shim")
     assert job_id_for(plan, cfg) == base                # tables and reports match rows by this one: unchanged
     assert job_id_for(plan, cfg, threads=1) != full     # a row from the other path is not silently reused
+
+
+@needs_amd_avx512
+@pytest.mark.slow
+def test_the_bench_command_reexecutes_itself_onto_the_avx512_path() -> None:
+    """End to end: the console script re-executes itself with the shim, and the off switch keeps MKL's generic path."""
+    bench = Path(sys.executable).with_name("bench")
+    if not bench.exists():
+        pytest.skip("the bench console script is not installed beside this interpreter")
+    for switch, expected in (("1", "MKL AVX-512 path (blas: mkl-avx512-shim"), ("0", "(blas: default")):
+        env = {**os.environ, md.ENV_SWITCH: switch}
+        env.pop(md.ENV_TRIED, None)
+        env.pop("LD_PRELOAD", None)
+        done = subprocess.run([str(bench), "list"], env=env, capture_output=True, text=True, timeout=300, cwd=ROOT)
+        assert done.returncode == 0, done.stderr[-2000:]
+        assert expected in done.stdout.splitlines()[-1], done.stdout[-500:]
