@@ -132,6 +132,14 @@ void forward_level(const float* tp, const float* xp, const Level& lv, int64_t l,
 // rounding (fused multiply-adds); tests/methods/test_monosdf.py compares both kernels with the PyTorch
 // reference and with each other. set_simd_kernel(false) selects the per-point kernels.
 constexpr int SIMD_B = 16;
+
+// The block's n <= 16 points (x: (P, 3) rows from p0), axis-major; a partial last block padded with 0.
+inline void load_block_points(const float* xp, int64_t p0, int n, __m512 (&xb)[3]) {
+    alignas(64) float xs[3][SIMD_B];
+    for (int i = 0; i < SIMD_B; ++i)
+        for (int d = 0; d < 3; ++d) xs[d][i] = i < n ? xp[3 * (p0 + i) + d] : 0.f;
+    for (int d = 0; d < 3; ++d) xb[d] = _mm512_load_ps(xs[d]);
+}
 constexpr int C_MAX_FEATURES_OUT = 4 * 4 * SIMD_B;  // block_level_avx512's out for one level (4 x FT x SIMD_B, FT <= 4)
 
 // The cell of 16 points at one level: per-axis corner index terms (hashed or dense), fractions and weights;
@@ -275,18 +283,17 @@ void backward_all_avx512(const float* gf, const float* gj, const float* xp, cons
         for (int64_t b = 0; b < nblocks; ++b) {
             const int64_t p0 = b * SIMD_B;
             const int n = (int)std::min<int64_t>(SIMD_B, P - p0);
-            alignas(64) float xs[3][SIMD_B];
-            for (int i = 0; i < SIMD_B; ++i) {  // the block's points and incoming gradients, transposed; padded with 0
+            for (int i = 0; i < SIMD_B; ++i) {  // the block's incoming gradients, transposed; padded with 0
                 const bool in = i < n;
                 const int64_t p = p0 + i;
-                for (int d = 0; d < 3; ++d) xs[d][i] = in ? xp[3 * p + d] : 0.f;
                 for (int64_t c = 0; c < C; ++c) {
                     if (HAS_FEAT) g[c * SIMD_B + i] = in ? gf[p * C + c] : 0.f;
                     if (HAS_JAC)
                         for (int d = 0; d < 3; ++d) g[((1 + d) * C + c) * SIMD_B + i] = in ? gj[(p * 3 + d) * C + c] : 0.f;
                 }
             }
-            const __m512 xb[3] = {_mm512_load_ps(xs[0]), _mm512_load_ps(xs[1]), _mm512_load_ps(xs[2])};
+            __m512 xb[3];
+            load_block_points(xp, p0, n, xb);
             for (int64_t l = 0; l < L; ++l) {
                 if (levels[l].hashed) block_level_backward_avx512<FT, HAS_FEAT, HAS_JAC, true>(g, xb, levels[l], l, C, n, gt);
                 else block_level_backward_avx512<FT, HAS_FEAT, HAS_JAC, false>(g, xb, levels[l], l, C, n, gt);
@@ -309,10 +316,8 @@ void forward_all_avx512(const float* tp, const float* xp, const int64_t* mp, int
         for (int64_t b = 0; b < nblocks; ++b) {
             const int64_t p0 = b * SIMD_B;
             const int n = (int)std::min<int64_t>(SIMD_B, P - p0);
-            alignas(64) float xs[3][SIMD_B];  // axis-major; a partial last block padded with 0
-            for (int i = 0; i < SIMD_B; ++i)
-                for (int d = 0; d < 3; ++d) xs[d][i] = i < n ? xp[3 * (p0 + i) + d] : 0.f;
-            const __m512 xb[3] = {_mm512_load_ps(xs[0]), _mm512_load_ps(xs[1]), _mm512_load_ps(xs[2])};
+            __m512 xb[3];
+            load_block_points(xp, p0, n, xb);
             for (int64_t l = 0; l < L; ++l) {
                 if (levels[l].hashed) block_level_avx512<FT, WITH_JAC, true>(tp, xb, levels[l], l, out, C);
                 else block_level_avx512<FT, WITH_JAC, false>(tp, xb, levels[l], l, out, C);
@@ -341,10 +346,8 @@ void forward_features_avx512(const float* tp, const float* xp, const int64_t* mp
         for (int64_t b = 0; b < nblocks; ++b) {
             const int64_t p0 = b * SIMD_B;
             const int n = (int)std::min<int64_t>(SIMD_B, P - p0);
-            alignas(64) float xs[3][SIMD_B];
-            for (int i = 0; i < SIMD_B; ++i)
-                for (int d = 0; d < 3; ++d) xs[d][i] = i < n ? xp[3 * (p0 + i) + d] : 0.f;
-            const __m512 xb[3] = {_mm512_load_ps(xs[0]), _mm512_load_ps(xs[1]), _mm512_load_ps(xs[2])};
+            __m512 xb[3];
+            load_block_points(xp, p0, n, xb);
             alignas(64) float out[C_MAX_FEATURES_OUT];
             if (lv.hashed) block_level_avx512<FT, false, true>(tp, xb, lv, 0, out, FT);
             else block_level_avx512<FT, false, false>(tp, xb, lv, 0, out, FT);
