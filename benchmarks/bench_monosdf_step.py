@@ -105,10 +105,11 @@ def main() -> None:
     args = ap.parse_args()
 
     torch.set_num_threads(args.threads)
+    kernels = contextlib.ExitStack()  # held until main returns (a bare __enter__() would be undone when collected)
     if args.per_point_grid:
         from methods.monosdf.grid import per_point_grid_kernel
 
-        per_point_grid_kernel().__enter__()  # for the whole process
+        kernels.enter_context(per_point_grid_kernel())
     scene = load_dataset(args.scene, args.scale)
     overrides = {"fast_grid": not args.reference_grid}
     if args.rays:
