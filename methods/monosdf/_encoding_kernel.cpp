@@ -5,11 +5,19 @@
 //
 // Layout of pe (P, 3 + 6F): [u (3), sin(f_0 u) (3), ..., sin(f_{F-1} u) (3), cos(f_0 u) (3), ..., cos(f_{F-1} u) (3)].
 #include <torch/extension.h>
+#include <algorithm>
 #include <cmath>
+#include <math.h>
 #include <vector>
 #include <omp.h>
 
 // u: (P, 3), freqs: (F,) -> pe (P, 3 + 6F).
+// Blocks of kEncodeBlock points: each (frequency, axis) column is one loop over the block's points, with the
+// sines and the cosines in two separate loops, which the compiler vectorises into glibc's vector sinf / cosf
+// (libmvec, -ffast-math: 16 lanes with AVX-512); one loop computing both becomes a scalar sincosf per value
+// (measured: ~10 % of a training step at 1 thread, perf). Where libmvec is absent the loops stay scalar.
+constexpr int64_t kEncodeBlock = 64;
+
 torch::Tensor pe_encode(torch::Tensor u, torch::Tensor freqs) {
     TORCH_CHECK(u.dtype() == torch::kFloat32 && u.dim() == 2 && u.size(1) == 3, "pe_encode: float32 (P, 3) points expected");
     auto uc = u.contiguous();
@@ -19,21 +27,30 @@ torch::Tensor pe_encode(torch::Tensor u, torch::Tensor freqs) {
     const float* up = uc.data_ptr<float>();
     const float* fp = fc.data_ptr<float>();
     float* op = pe.data_ptr<float>();
+    const int64_t blocks = (P + kEncodeBlock - 1) / kEncodeBlock;
 #pragma omp parallel for schedule(static)
-    for (int64_t p = 0; p < P; ++p) {
-        const float* x = up + 3 * p;
-        float* row = op + D * p;
-        row[0] = x[0];
-        row[1] = x[1];
-        row[2] = x[2];
-        float* s = row + 3;
-        float* c = row + 3 + 3 * F;
-#pragma omp simd collapse(2)
+    for (int64_t b = 0; b < blocks; ++b) {
+        const int64_t p0 = b * kEncodeBlock, n = std::min(kEncodeBlock, P - p0);
+        float arg[kEncodeBlock], sv[kEncodeBlock], cv[kEncodeBlock];
+        for (int64_t i = 0; i < n; ++i) {
+            float* row = op + D * (p0 + i);
+            row[0] = up[3 * (p0 + i)];
+            row[1] = up[3 * (p0 + i) + 1];
+            row[2] = up[3 * (p0 + i) + 2];
+        }
         for (int64_t k = 0; k < F; ++k) {
             for (int d = 0; d < 3; ++d) {
-                const float v = fp[k] * x[d];
-                s[3 * k + d] = sinf(v);
-                c[3 * k + d] = cosf(v);
+                for (int64_t i = 0; i < n; ++i) arg[i] = fp[k] * up[3 * (p0 + i) + d];
+#pragma omp simd
+                for (int64_t i = 0; i < n; ++i) sv[i] = sinf(arg[i]);
+#pragma omp simd
+                for (int64_t i = 0; i < n; ++i) cv[i] = cosf(arg[i]);
+                float* s = op + D * p0 + 3 + 3 * k + d;
+                float* c = s + 3 * F;
+                for (int64_t i = 0; i < n; ++i) {
+                    s[D * i] = sv[i];
+                    c[D * i] = cv[i];
+                }
             }
         }
     }

@@ -269,16 +269,23 @@ class SDFNetwork(torch.nn.Module):
             # explicit vector-Jacobian product of the SDF output (differentiable, first-order ops only):
             # g = d sdf / d (input of layer i), walked from the last layer to the first; the encoding's
             # share of every skip layer's input gradient is collected in g_pe
-            g = ws[-1][0].expand(a.shape[0], ws[-1].shape[1])
+            # d sdf / d (input of the last layer) is its weight row, the same for every point: while g is
+            # that row (g is None), the row is folded into the next layer's weight, (s * w) @ W =
+            # s @ (w[:, None] * W), instead of a (P, H) product and its backward
+            w_row = ws[-1][0]
+            g: torch.Tensor | None = None
             g_pe: torch.Tensor | None = None
             for i in range(n_lin - 1, 0, -1):
                 if i in self.skip:
+                    if g is None:
+                        g = w_row.expand(a.shape[0], w_row.shape[0])
                     h = ws[i].shape[1] - self.n_pe
                     g_pe = g[:, h:] if g_pe is None else g_pe + g[:, h:]
                     g = g[:, :h]
                 if i > 1:
-                    g = (g * slopes[i - 1]) @ ws[i - 1]  # (P, in of layer i - 1)
-            g0 = g * slopes[0]  # (P, H): d sdf / d (first layer pre-activation)
+                    # (P, in of layer i - 1)
+                    g = slopes[i - 1] @ (w_row[:, None] * ws[i - 1]) if g is None else (g * slopes[i - 1]) @ ws[i - 1]
+            g0 = slopes[0] * w_row if g is None else g * slopes[0]  # (P, H): d sdf / d (first layer pre-activation)
             c = self.n_grid
             # one product per input block of the first layer (grid / encoding), then each block's own chain rule
             gin_pe = g0 @ ws[0][:, c:]

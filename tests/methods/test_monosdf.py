@@ -148,7 +148,8 @@ def test_explicit_sdf_gradient_backpropagates_like_double_backward(fast, pe, rad
         torch.testing.assert_close(got, want, atol=1e-3, rtol=1e-3)  # the C++ kernels are float32 -ffast-math
 
 
-@pytest.mark.parametrize("fast,skip,weight_norm", [(True, (2,), False), (False, (2,), True), (True, (1, 3), True), (True, (), False)])
+@pytest.mark.parametrize("fast,skip,weight_norm", [(True, (2,), False), (False, (2,), True), (True, (1, 3), True), (True, (), False),
+                                                  (True, (4,), False)])  # (4,): the last layer re-takes the encoding
 def test_mlp_variant_gradient_and_its_backward_match_autograd(fast, skip, weight_norm):
     """MonoSDF's MLP variant (no grid: PE alone, skip layers re-concatenating the encoding / sqrt(2),
     weight norm): the explicit gradient equals autograd through the slow twin (which concatenates
