@@ -14,24 +14,12 @@ Usage:
 from __future__ import annotations
 
 import argparse
-import statistics
-import time
-from collections.abc import Callable
 
 import torch
 
+from bench.microbench import median_seconds
 from methods.monosdf.field import SDFNetwork, _softplus_and_slope
 from methods.monosdf.grid import fast_available
-
-
-def median_ms(fn: Callable[[], object], repeat: int) -> float:
-    fn()
-    times = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return 1000 * statistics.median(times)
 
 
 def summed(outputs: tuple[torch.Tensor, torch.Tensor]) -> torch.Tensor:
@@ -68,7 +56,7 @@ def main() -> None:
     ]
     print(f"{P} points, {args.threads} thread(s), median of {r} calls")
     for name, fast, ref in rows:
-        f, s = median_ms(fast, r), median_ms(ref, r)
+        f, s = 1000 * median_seconds(fast, r), 1000 * median_seconds(ref, r)
         print(f"  {name:32s} C++ {f:7.3f} ms   PyTorch twin {s:7.3f} ms   ({s / f:4.1f}x)")
 
 

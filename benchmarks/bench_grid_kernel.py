@@ -14,11 +14,11 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import statistics
 import time
 
 import torch
 
+from bench.microbench import median_seconds
 from methods.monosdf.grid import FeatureGrid, interpolate_fast, interpolate_reference, make_grid_spec, per_point_grid_kernel, simd_kernel_compiled
 
 
@@ -34,14 +34,7 @@ def ray_points(rays: int, samples: int, seed: int = 0) -> torch.Tensor:
 
 def timed(fn, repeat: int) -> float:
     """Median process CPU seconds of ``fn()`` over ``repeat`` calls (3 warm-up calls first)."""
-    for _ in range(3):
-        fn()
-    times = []
-    for _ in range(repeat):
-        t = time.process_time()
-        fn()
-        times.append(time.process_time() - t)
-    return statistics.median(times)
+    return median_seconds(fn, repeat, warmup=3, clock=time.process_time)
 
 
 def main() -> None:

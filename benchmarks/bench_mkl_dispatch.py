@@ -16,20 +16,14 @@ import argparse
 import os
 import subprocess
 import sys
-import time
+
+from bench.microbench import median_seconds
 
 SHAPES = [(55, 32), (32, 32), (32, 16), (24, 32)]
 
 
 def _median_ms(fn, repeats: int) -> float:
-    fn()
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    times.sort()
-    return times[len(times) // 2] * 1e3
+    return 1e3 * median_seconds(fn, repeats)
 
 
 def measure(points: int, threads: int, repeats: int) -> None:
