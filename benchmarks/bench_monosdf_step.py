@@ -7,12 +7,15 @@ and a per-op breakdown from torch.profiler.
 Usage:
     .venv/bin/python benchmarks/bench_monosdf_step.py [--scene scannet_like_0] [--scale small] [--steps 20]
         [--rays 512] [--reference-grid | --per-point-grid] [--threads 2] [--no-profile] [--set prune_weight=1e-4]
-        [--train 2000 --checkpoint /tmp/monosdf_2000.pt] [--cpu-time] [--phases]
+        [--train 2000 --checkpoint /tmp/monosdf_2000.pt] [--cpu-time] [--phases] [--processes 2]
 
 ``--train N`` times the step at a late point of a schedule (beta small, most samples weightless: where
 ``prune_weight`` pays): N steps are trained first (with the config's other keys) and cached in
 ``--checkpoint``. ``--cpu-time`` reports the process's CPU time per step instead of wall time: on a
-shared machine wall time includes time the process waited for a core.
+shared machine wall time includes time the process waited for a core. ``--processes N`` runs N copies of the
+benchmark side by side, each with one thread and no profile (how ``bench run`` uses 2 cores: two single-threaded
+jobs), and prints their summed throughput (the copies share memory bandwidth and caches, so this is below N times
+the throughput of one copy alone).
 
 Goal (issue 4): >= 0.5 M ray-samples/s.
 """
@@ -81,6 +84,32 @@ def time_phases(trainer: MonoSDFTrainer, steps: int, clock: Callable[[], float])
             print(f"  {name:28s} {ms:7.1f} ms  {100.0 * ms / (total * 1000.0):5.1f} %")
 
 
+def run_side_by_side(n: int) -> None:
+    """Start ``n`` copies of this benchmark (same arguments, ``--threads 1 --no-profile``, no ``--phases``) at
+    once, wait for all, and print each copy's throughput line and their sum."""
+    import re
+    import subprocess
+    import sys
+
+    argv = [a for a in sys.argv[1:] if a != "--phases"]
+    for flag in ("--processes", "--threads"):  # drop the flag and its value
+        while flag in argv:
+            i = argv.index(flag)
+            del argv[i : i + 2]
+    cmd = [sys.executable, __file__, *argv, "--threads", "1", "--no-profile"]
+    procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True) for _ in range(n)]
+    total = 0.0
+    for k, proc in enumerate(procs):
+        out, _ = proc.communicate()
+        if proc.returncode != 0:
+            raise SystemExit(f"copy {k} failed (exit {proc.returncode}):\n{out}")
+        line = next(ln for ln in out.splitlines() if ln.startswith("throughput:"))
+        step = next(ln for ln in out.splitlines() if ln.startswith("step time:"))
+        print(f"copy {k}: {step}; {line}")
+        total += float(re.search(r"median ([0-9.]+) M", line).group(1))  # type: ignore[union-attr]
+    print(f"{n} single-threaded copies side by side: {total:.3f} M samples/s in total (sum of the medians)")
+
+
 def main() -> None:
     from bench.mkl_dispatch import mkl_code_path, reexec_with_mkl_shim
 
@@ -102,7 +131,12 @@ def main() -> None:
     ap.add_argument("--cpu-time", action="store_true", help="process CPU time per step instead of wall time")
     ap.add_argument("--phases", action="store_true", help="then time the step's phases (sampler, render, prune pass, "
                     "SDF with gradient, colour, backward, optimiser) over --steps more steps")
+    ap.add_argument("--processes", type=int, default=1, help="run this many single-threaded copies side by side and "
+                    "print their summed throughput (the tables' regime: one job per core)")
     args = ap.parse_args()
+    if args.processes > 1:
+        run_side_by_side(args.processes)
+        return
 
     torch.set_num_threads(args.threads)
     kernels = contextlib.ExitStack()  # held until main returns (a bare __enter__() would be undone when collected)
