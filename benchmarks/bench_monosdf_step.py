@@ -93,11 +93,9 @@ def run_side_by_side(n: int) -> None:
     import sys
 
     argv = [a for a in sys.argv[1:] if a != "--phases"]
-    for flag in ("--processes", "--threads"):  # drop the flag and its value
-        while flag in argv:
-            i = argv.index(flag)
-            del argv[i : i + 2]
-    cmd = [sys.executable, __file__, *argv, "--threads", "1", "--no-profile"]
+    # the appended options override the caller's in any spelling (argparse keeps the last occurrence), so a
+    # copy never starts copies of its own ("--processes=2" and "--proc 2" were not caught by a flag filter)
+    cmd = [sys.executable, __file__, *argv, "--threads", "1", "--processes", "1", "--no-profile"]
     procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True) for _ in range(n)]
     total = 0.0
     for k, proc in enumerate(procs):
