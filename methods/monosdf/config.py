@@ -93,6 +93,7 @@ class MonoSDFConfig:
     mesh_resolution: Annotated[int, Range(lo=8)]
     mesh_extent: Annotated[float, Positive] | None
     fast_grid: bool
+    flush_denormals: bool
     threads: Annotated[int, NonNegative]
 
     def samples_per_ray(self) -> int:

@@ -79,6 +79,10 @@ class MonoSDFTrainer:
 
     def __init__(self, scene: Scene, cfg: MonoSDFConfig, seed: int) -> None:
         self.scene, self.cfg, self.seed = scene, cfg, seed
+        # float32 denormals -> 0 (FTZ / DAZ) for this process's thread (and threads it starts later): arithmetic on
+        # denormals takes a slow microcode path, and a sharp field (softplus slopes sigmoid(100 z), the products of the
+        # backward) produces them; values change only below 1.2e-38 (docs/monosdf.md, session 23)
+        torch.set_flush_denormal(bool(cfg.flush_denormals))
         torch.manual_seed(seed)
         self.gen = torch.Generator().manual_seed(seed)
         self.views = scene.view_indices("train")
