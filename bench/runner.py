@@ -38,7 +38,8 @@ def job_id_for(plan: JobPlan, config: dict[str, Any], threads: int | None = None
     counts: float sums in another order), so a row computed with another count is not silently reused;
     without it, the *base id* that tables and reports match results by. With ``threads`` the id also
     covers this process's matrix-product code path (:func:`bench.mkl_dispatch.blas_path`, which the
-    local executor's workers inherit) when it is not the default one, for the same reason."""
+    local executor's workers inherit) when it is not the default one, and a config's ``flush_denormals``
+    when on (session 23; the base id leaves it out through ``id_neutral``), for the same reason."""
     from bench.mkl_dispatch import blas_path
 
     key = {
@@ -55,6 +56,8 @@ def job_id_for(plan: JobPlan, config: dict[str, Any], threads: int | None = None
         key["torch_threads"] = int(threads)
         if (blas := blas_path()) != "default":
             key["blas"] = blas
+        if config.get("flush_denormals"):  # a MonoSDF-family job flushes float32 denormals (left out of the base id)
+            key["denormals"] = "flushed"
     return hashlib.sha256(json.dumps(key, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 

@@ -141,6 +141,22 @@ def test_id_neutral_keys_leave_job_ids_alone_only_at_their_neutral_value():
         assert mlp["use_grid"] is False and mlp["mlp_skip"] == [2] and "weight_norm" not in mlp
 
 
+def test_flush_denormals_stays_out_of_the_base_id_and_enters_the_full_id():
+    """``flush_denormals`` (float-rounding kind, session 23): at its default the base id that tables match rows by is
+    the one of the rows published before the key existed (IEEE arithmetic); the full id that decides reuse differs, so
+    an IEEE row is not reused as a flushed one."""
+    from bench.jobs import JobPlan
+    from bench.runner import job_id_for
+    from methods.registry import method_config
+
+    plan = JobPlan("t", "Base", "monosdf", {}, "scannet", "scannet", "scannet", "scannet_like_tiny", 0, "tiny")
+    on = method_config("monosdf", "tiny")
+    before = {k: v for k, v in on.items() if k != "flush_denormals"}  # a config from before the key
+    assert on["flush_denormals"] is True
+    assert job_id_for(plan, on) == job_id_for(plan, before)
+    assert job_id_for(plan, on, threads=1) != job_id_for(plan, before, threads=1)
+
+
 def test_mlp_skip_that_cannot_be_built_is_one_config_error():
     from methods.registry import method_config
 
