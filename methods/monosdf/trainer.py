@@ -79,10 +79,6 @@ class MonoSDFTrainer:
 
     def __init__(self, scene: Scene, cfg: MonoSDFConfig, seed: int) -> None:
         self.scene, self.cfg, self.seed = scene, cfg, seed
-        # float32 denormals -> 0 (FTZ / DAZ) for this process's thread (and threads it starts later): arithmetic on
-        # denormals takes a slow microcode path, and a sharp field (softplus slopes sigmoid(100 z), the products of the
-        # backward) produces them; values change only below 1.2e-38 (docs/monosdf.md, session 23)
-        torch.set_flush_denormal(bool(cfg.flush_denormals))
         torch.manual_seed(seed)
         self.gen = torch.Generator().manual_seed(seed)
         self.views = scene.view_indices("train")
@@ -253,6 +249,20 @@ class MonoSDFTrainer:
         return terms
 
     def step(self, view: int | None = None) -> dict[str, float]:
+        """One optimisation step (:meth:`_step`), with float32 denormals flushed to 0 (FTZ / DAZ) while it runs when
+        ``flush_denormals`` is on: arithmetic on denormals takes a slow microcode path, and a sharp field (softplus
+        slopes sigmoid(100 z), the products of the backward) produces them; values change only below 1.2e-38
+        (docs/monosdf.md, session 23). The mode is restored to IEEE after the step: left on process-wide, scipy's
+        ``cKDTree.query_ball_point`` in a later DTU evaluation crashed (segfault, session 23's CI)."""
+        if not self.cfg.flush_denormals:
+            return self._step(view)
+        torch.set_flush_denormal(True)
+        try:
+            return self._step(view)
+        finally:
+            torch.set_flush_denormal(False)
+
+    def _step(self, view: int | None = None) -> dict[str, float]:
         """One optimisation step; returns the loss terms.
 
         ``rays_per_batch`` rays from ``images_per_batch`` distinct training images drawn at random
