@@ -566,6 +566,8 @@ torch::Tensor softplus_slope_backward(torch::Tensor grad_a, torch::Tensor grad_s
 torch::Tensor pe_encode(torch::Tensor u, torch::Tensor freqs);
 torch::Tensor pe_chain_forward(torch::Tensor gin, torch::Tensor pe, torch::Tensor freqs);
 torch::Tensor pe_chain_backward(torch::Tensor dout, torch::Tensor pe, torch::Tensor freqs);
+bool set_flush_denormal_all_threads(bool on);
+std::vector<int64_t> flush_denormal_per_thread();
 
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
     m.def("softplus_slope_forward", &softplus_slope_forward, "softplus(beta) and sigmoid(beta z)");
@@ -585,4 +587,7 @@ PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
     m.def("pe_encode", &pe_encode, "positional encoding [u, sin(f u), cos(f u)]");
     m.def("pe_chain_forward", &pe_chain_forward, "d sdf / d u through the positional encoding");
     m.def("pe_chain_backward", &pe_chain_backward, "backward of pe_chain_forward w.r.t. its gradient input");
+    m.def("set_flush_denormal_all_threads", &set_flush_denormal_all_threads,
+          "FTZ/DAZ on or off in the calling thread and every OpenMP pool thread (false: no MXCSR on this CPU)");
+    m.def("flush_denormal_per_thread", &flush_denormal_per_thread, "per OpenMP thread: 1 FTZ/DAZ set, 0 not, -1 unknown");
 }

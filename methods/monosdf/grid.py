@@ -186,7 +186,7 @@ def _load_extension():
             try:
                 from torch.utils.cpp_extension import _get_build_directory, load
 
-                src = [str(Path(__file__).with_name(name)) for name in ("_grid_kernel.cpp", "_encoding_kernel.cpp")]
+                src = [str(Path(__file__).with_name(name)) for name in ("_grid_kernel.cpp", "_encoding_kernel.cpp", "_float_mode.cpp")]
                 verbose = os.environ.get("BENCH_VERBOSE_BUILD") == "1"
                 with build_lock(Path(_get_build_directory(EXT_NAME, verbose))):
                     _EXT = load(name=EXT_NAME, sources=src, extra_cflags=["-O3", "-fopenmp", "-march=native", "-ffast-math"],

@@ -29,6 +29,7 @@ from methods.base import Snapshot
 from methods.monosdf.config import MonoSDFConfig
 from methods.monosdf.error_bounded import error_bounded_samples
 from methods.monosdf.field import ColorNetwork, LaplaceDensity, SDFNetwork
+from methods.monosdf.float_mode import denormals_flushed
 from methods.monosdf.grid import make_grid_spec
 from methods.monosdf.losses import color_loss, eikonal_loss, normal_loss, smoothness_loss, ssi_depth_fit, ssi_depth_fit_code
 from methods.monosdf.rays import build_rays, normalisation
@@ -252,15 +253,10 @@ class MonoSDFTrainer:
         """One optimisation step (:meth:`_step`), with float32 denormals flushed to 0 (FTZ / DAZ) while it runs when
         ``flush_denormals`` is on: arithmetic on denormals takes a slow microcode path, and a sharp field (softplus
         slopes sigmoid(100 z), the products of the backward) produces them; values change only below 1.2e-38
-        (docs/monosdf.md, session 23). The mode is restored to IEEE after the step: left on process-wide, scipy's
-        ``cKDTree.query_ball_point`` in a later DTU evaluation crashed (segfault, session 23's CI)."""
-        if not self.cfg.flush_denormals:
+        (docs/monosdf.md, session 23). The mode is set in the OpenMP pool threads too and reset to IEEE after the
+        step (``float_mode.denormals_flushed``)."""
+        with denormals_flushed(self.cfg.flush_denormals):
             return self._step(view)
-        torch.set_flush_denormal(True)
-        try:
-            return self._step(view)
-        finally:
-            torch.set_flush_denormal(False)
 
     def _step(self, view: int | None = None) -> dict[str, float]:
         """One optimisation step; returns the loss terms.

@@ -369,17 +369,29 @@ def _trainer(scene, **over):
 
 
 def test_flush_denormals_holds_during_a_step_only_and_steps_stay_finite(tiny_scene):
-    """``flush_denormals`` (config): a trainer flushes float32 denormals to 0 (FTZ / DAZ) while a step runs and restores
-    IEEE arithmetic after it (left on, a later scipy KD-tree query crashed); the twin ``false`` never flushes. A denormal
-    operand (1e-39 < 1.18e-38) reads as 0 in a product and a matrix product under the flush."""
+    """``flush_denormals`` (config): a trainer flushes float32 denormals to 0 (FTZ / DAZ), in its OpenMP pool threads
+    too, while a step runs and restores IEEE arithmetic after it (left on, a later scipy KD-tree query crashed); the
+    twin ``false`` never flushes. A denormal operand (1e-39 < 1.18e-38) reads as 0 in a product and a matrix product under the flush."""
+    from methods.monosdf.float_mode import flush_denormal_per_thread, pool_threads_reached
+
     tiny = torch.full((4, 4), 1e-39)
     seen: list[float] = []
+    modes: list[list[int]] = []
+
+    def probe(*a, **k):
+        seen.append(float((tiny @ torch.eye(4))[0, 0]))
+        modes.append(flush_denormal_per_thread())
+        return {}
+
     for flush in (True, False):
         tr = _trainer(tiny_scene, flush_denormals=flush)
-        tr.extra_losses.append(lambda *a, **k: (seen.append(float((tiny @ torch.eye(4))[0, 0])), {})[1])
+        tr.extra_losses.append(probe)
         assert all(np.isfinite(v) for v in tr.step().values())
         assert float((tiny * 1.0)[0, 0]) == pytest.approx(1e-39, rel=1e-3)  # IEEE again after the step
     assert seen[0] == 0.0 and seen[1] == pytest.approx(1e-39, rel=1e-3)
+    if pool_threads_reached():  # every OpenMP pool thread flushes during the step (session 24), none without it
+        assert set(modes[0]) == {1} and set(modes[1]) == {0}
+    assert set(flush_denormal_per_thread()) <= {0, -1}
 
 
 def test_camera_outside_bounding_sphere_is_a_clear_error(tiny_scene):
