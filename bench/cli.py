@@ -75,6 +75,9 @@ def cmd_list(args: argparse.Namespace) -> int:
     from bench.mkl_dispatch import blas_path, mkl_code_path
 
     print(f"matrix products: MKL {mkl_code_path()} path (blas: {blas_path()}; bench/mkl_dispatch.py)")
+    from bench.machine import cpu_description
+
+    print(f"CPU: {cpu_description()} (recorded in every job row: times depend on it)")
     return 0
 
 

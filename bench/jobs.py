@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from bench import __version__
+from bench.machine import cpu_description
 
 RESULT_SCHEMA = 1
 REQUIRED_FIELDS = ("job_id", "table", "row", "method", "scene", "dataset", "seed", "scale", "status")
@@ -100,6 +101,7 @@ def row_head(job: Job) -> dict[str, Any]:
         "seed": plan.seed,
         "scale": plan.scale,
         "versions": versions(),
+        "cpu": cpu_description(),
         "worker": f"{socket.gethostname()}:{os.getpid()}",
         "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
     }

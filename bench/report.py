@@ -100,8 +100,10 @@ def render_report(specs: Sequence[TableSpec], df: pd.DataFrame, scale: str, out_
     if len(df):
         scales = sorted({str(v) for v in df["scale"].unique()})
         versions = sorted({f"{k} {v}" for vs in df["versions"] for k, v in vs.items()})
+        cpus = sorted({str(c) for c in (df["cpu"] if "cpu" in df else []) if c})  # times depend on it (bench.machine)
         sections.append(f"Scales present in the results: {', '.join(scales)}. "
-                        f"Versions: {', '.join(versions) or 'not recorded'}.")
+                        f"Versions: {', '.join(versions) or 'not recorded'}. "
+                        f"CPUs (times depend on them): {'; '.join(cpus) or 'not recorded'}.")
     sections += ["", "Tables:"] + [f"- [{r.spec.title}]({r.spec.name}.md)" for r in reports] + [""]
     for r in reports:
         paths = write_table_outputs(r, out)

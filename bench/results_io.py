@@ -16,7 +16,7 @@ from bench.jobs import REQUIRED_FIELDS, RESULT_SCHEMA
 RESULT_COLUMNS = [
     "job_id", "base_id", "table", "row", "method", "group", "dataset", "scene", "seed", "scale", "status",
     "error_type", "error_message", "metrics", "timings", "iterations", "curve", "config", "created",
-    "worker", "versions", "path",
+    "worker", "versions", "cpu", "path",
 ]
 
 
@@ -54,7 +54,8 @@ def _read_job(path: Path) -> dict[str, Any]:
         "metrics": dict(d.get("metrics") or {}), "timings": dict(d.get("timings") or {}),
         "iterations": d.get("iterations"), "curve": list(d.get("curve") or []),
         "config": dict(d.get("config") or {}), "created": str(d.get("created") or ""),
-        "worker": d.get("worker"), "versions": dict(d.get("versions") or {}), "path": str(path),
+        "worker": d.get("worker"), "versions": dict(d.get("versions") or {}),
+        "cpu": d.get("cpu"), "path": str(path),
     }
 
 

@@ -62,6 +62,15 @@ def _mean_total(report: TableReport, label: str, gid: str) -> str:
     return "" if sel.empty else f"{sel['mean'].iloc[0]:.1f}"
 
 
+def _cpu_line(jobs: pd.DataFrame) -> str:
+    """Which CPUs the jobs ran on (``bench.machine``): times vary with the VM's CPU, metrics do not."""
+    cpus = jobs["cpu"].value_counts() if "cpu" in jobs else pd.Series(dtype=int)
+    named = ", ".join(f"{cpu} ({n} job{'s' if n != 1 else ''})" for cpu, n in cpus.items() if cpu)
+    missing = len(jobs) - int(cpus.sum())
+    unknown = f"{', ' if named else ''}not recorded ({missing} job{'s' if missing != 1 else ''}, written before the field existed)" if missing else ""
+    return f"Measured on: {named}{unknown}. Times depend on the CPU; the metrics do not."
+
+
 def to_markdown(report: TableReport, heading_level: int = 2) -> str:
     """The table as markdown: ours ± std beside the paper's values, stage timings and claims."""
     spec, h = report.spec, "#" * heading_level
@@ -112,7 +121,7 @@ def to_markdown(report: TableReport, heading_level: int = 2) -> str:
         parts += ["", _convergence_sentence(spec)]
     if spec.notes:
         parts += [""] + [f"- {n}" for n in spec.notes]
-    parts += ["", f"{h}# Stage timings (mean wall seconds per job)", "", _timing_markdown(report)]
+    parts += ["", f"{h}# Stage timings (mean wall seconds per job)", "", _timing_markdown(report), "", _cpu_line(jobs)]
     cost = _table_cost(report)
     if cost:
         parts += ["", cost]

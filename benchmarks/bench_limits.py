@@ -56,10 +56,11 @@ def grid_flops(points: int, levels: int, features: int, with_jacobian: bool) -> 
 
 
 def main() -> None:
+    from bench.machine import cpu_description
     from bench.mkl_dispatch import mkl_code_path, reexec_with_mkl_shim
 
     reexec_with_mkl_shim()  # MKL's AVX-512 path on a non-Intel CPU, as `bench` runs (BENCH_MKL_AVX512=0: the generic path)
-    print(f"matrix products: MKL {mkl_code_path()} path")
+    print(f"matrix products: MKL {mkl_code_path()} path; CPU: {cpu_description()}")
     from torch.utils.flop_counter import FlopCounterMode
 
     from bench.data.datasets import load_dataset

@@ -10,6 +10,7 @@ import pytest
 from bench.cli import main
 from bench.executors.local import LocalExecutor
 from bench.jobs import Job, JobPlan
+from bench.machine import cpu_description
 from bench.pipeline import plan_jobs
 from bench.runner import job_id_for, plan_index, resolve_jobs, run_jobs
 from bench.table_spec import load_table_spec
@@ -42,6 +43,7 @@ def test_run_ablation_tiny_writes_table_with_oracle_row(tiny_run, capsys):
     assert m["fscore"] >= 0.95, m  # acceptance: the oracle is an upper bound
     assert m["acc"] < 0.02 and m["comp"] < 0.03
     assert set(oracle[0]["timings"]) >= {"data", "train", "eval", "total"}
+    assert oracle[0]["cpu"] == cpu_description() and f"Measured on: {cpu_description()}" in md  # times depend on it
     assert [c["fraction"] for c in oracle[0]["curve"]] == [0.25, 0.5, 1.0]
     art = oracle[0]["artifacts"]  # the final mesh is kept beside the numbers
     assert art["files"] == ["mesh.ply"] and (out / art["dir"] / "mesh.ply").stat().st_size > 1000
