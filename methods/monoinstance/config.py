@@ -139,6 +139,8 @@ class MonoInstanceConfig(MonoSDFConfig):
     final_phase_lr: Annotated[float, Positive] | None
     # overrides of the uncertainty stage's YAML
     uncertainty_stage: dict[str, Any]
+    # harness: stage 1 trained once per scene / seed / MonoSDF config and reused (methods.stage_cache)
+    share_stage1: bool
 
     def check(self) -> str | None:
         problem = super().check()

@@ -33,9 +33,11 @@ from methods.monoinstance.config import MonoInstanceConfig
 from methods.monoinstance.mask_constraint import MaskConstraint
 from methods.monoinstance.sampling import GuidedSampler
 from methods.monoinstance.stage import run_uncertainty_stage
+from methods.monosdf.config import MonoSDFConfig
 from methods.monosdf.method import set_threads
 from methods.monosdf.trainer import MonoSDFTrainer, train_with_snapshots
 from methods.registry import register
+from methods.stage_cache import checkpoint_dir, load_stage, save_stage, stage_key, tensor_digest
 
 
 def certainty_weights(uncertainty: np.ndarray, instance_ids: np.ndarray, is_background: dict[int, bool], cutoff: float) -> np.ndarray:
@@ -52,6 +54,24 @@ def certainty_weights(uncertainty: np.ndarray, instance_ids: np.ndarray, is_back
 def _chain(*fns):
     """One event callback running ``fns`` in order."""
     return lambda: [f() for f in fns]
+
+
+def stage1_key(trainer: MonoSDFTrainer, cfg: MonoInstanceConfig, seed: int, stage1_end: int, final_start: int) -> str | None:
+    """Key of this job's stage-1 end state in the stage cache (``methods.stage_cache``), or None when it cannot be
+    shared: no cache folder (a direct ``fit``), a snapshot before the end of stage 1 (its mesh would be missing), a
+    final phase starting inside stage 1, or no stage 2. Stage 1 is plain MonoSDF whatever the modules: the key holds
+    every MonoSDF key of the config (none of MonoInstance's own), the seed, the training data's bytes and the thread
+    count, and through ``stage_key`` the matrix-product path the harness passes (both round differently) and the code."""
+    total = cfg.iterations
+    marks = {max(1, int(round(f * total))) for f in cfg.fractions}
+    if checkpoint_dir() is None or min(marks) < stage1_end or final_start <= stage1_end or stage1_end >= total:
+        return None
+    rays = trainer.rays
+    data = tensor_digest(trainer.rgb, trainer.prior_depth, trainer.prior_normal, trainer.prior_weight, rays.origins, rays.dirs,
+                         rays.z_factor, rays.far, rays.world_to_cam_rot)
+    monosdf_keys = {f.name: getattr(cfg, f.name) for f in dataclasses.fields(MonoSDFConfig)}
+    return stage_key({"stage": "monoinstance.stage1", "end": stage1_end, "config": monosdf_keys, "seed": seed, "data": data,
+                      "scale": rays.scale, "threads": torch.get_num_threads()})
 
 
 @register("monoinstance")
@@ -71,10 +91,10 @@ class MonoInstance:
         extra: dict[str, Any] = {}
         stage: dict[str, np.ndarray] = {}
         events = {}
+        stage1_end = max(1, int(round(cfg.stage1_fraction * total)))
+        final_start = total - int(round(cfg.final_phase_fraction * total))
         if cfg.modules_on:
-            stage1_end = max(1, int(round(cfg.stage1_fraction * total)))
             events[stage1_end] = lambda: stage.update(U=self._between_stages(trainer, scene, cfg, seed, timings, extra))
-            final_start = total - int(round(cfg.final_phase_fraction * total))
             if final_start < total:  # code-only final phase: no mask constraint, its own depth / normal weights and lr
                 def final_phase() -> None:
                     trainer.extra_losses.clear()
@@ -84,9 +104,25 @@ class MonoInstance:
                         trainer.fixed_lr = cfg.final_phase_lr
 
                 events[max(final_start, stage1_end)] = final_phase if final_start > stage1_end else _chain(events[stage1_end], final_phase)
+        shared_s = 0.0  # seconds of stage 1 loaded from the stage cache instead of trained here
+        key = stage1_key(trainer, cfg, seed, stage1_end, final_start) if cfg.share_stage1 else None
+        state = None if key is None else load_stage(key)
+        if state is not None:
+            trainer.load_state_dict(state["trainer"])
+            shared_s = float(state["train_seconds"])
+            timings["train_shared"] = shared_s
+            if progress:
+                progress(stage1_end / total, f"stage 1 loaded from the stage cache ({shared_s:.0f} s of training not repeated)")
+        elif key is not None:  # train stage 1 here and store it for the other rows, before the between-stages work runs
+            t_train = time.perf_counter()
+
+            def store() -> None:
+                save_stage(key, {"trainer": trainer.state_dict(), "train_seconds": time.perf_counter() - t_train})
+
+            events[stage1_end] = _chain(store, events[stage1_end]) if stage1_end in events else store
         snapshots, train_s, mesh_s = train_with_snapshots(trainer, total, list(cfg.fractions), cfg.mesh_resolution,
-                                                          progress, start_seconds=timings["setup"], events=events)
-        timings.update(train=train_s, mesh=mesh_s)
+                                                          progress, start_seconds=timings["setup"] + shared_s, events=events)
+        timings.update(train=train_s + shared_s, mesh=mesh_s)
         uncertainty = stage.get("U")
         extra["beta"] = float(trainer.density.beta().detach())
         full_u = None

@@ -479,16 +479,29 @@ class MonoSDFTrainer:
 
     # ------------------------------------------------------------------ checkpoints
     def state_dict(self) -> dict[str, Any]:
+        """Everything the following steps and the next :meth:`diagnostics` depend on: loaded into a trainer built
+        with the same scene, config and seed, training continues exactly as it would have (the stage cache,
+        ``methods.stage_cache``, relies on it). The ray / pixel sampler state (MonoInstance's stage 2) is not in it."""
         return {"sdf": self.sdf.state_dict(), "color": self.color.state_dict(), "density": self.density.state_dict(),
-                "optim": self.optim.state_dict(), "step": self.step_count, "gen": self.gen.get_state(), "cfg": config_record(self.cfg), "seed": self.seed}
+                "optim": self.optim.state_dict(), "step": self.step_count, "gen": self.gen.get_state(), "cfg": config_record(self.cfg),
+                "seed": self.seed, "torch_rng": torch.get_rng_state(), "prunable_frac": self._prunable_frac,
+                "log": {"sums": dict(self._log_sums), "count": self._log_count, "depth_scales": list(self._depth_scales)}}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore :meth:`state_dict` (checkpoints written before session 24 lack the global RNG, the pruning
+        fraction and the diagnostics' running sums: those keep their current values)."""
         self.sdf.load_state_dict(state["sdf"])
         self.color.load_state_dict(state["color"])
         self.density.load_state_dict(state["density"])
         self.optim.load_state_dict(state["optim"])
         self.step_count = int(state["step"])
         self.gen.set_state(state["gen"])
+        if "torch_rng" in state:
+            torch.set_rng_state(state["torch_rng"])
+        self._prunable_frac = float(state.get("prunable_frac", self._prunable_frac))
+        if "log" in state:
+            log = state["log"]
+            self._log_sums, self._log_count, self._depth_scales = dict(log["sums"]), int(log["count"]), list(log["depth_scales"])
 
     def save(self, path: str | Path) -> None:
         """Write a checkpoint atomically."""
@@ -529,7 +542,6 @@ def train_with_snapshots(
     marks = sorted({max(1, int(round(f * iterations))) for f in fractions})
     snaps: list[Snapshot] = []
     train_s = event_s = mesh_s = 0.0
-    it0 = trainer.step_count
     for stop in sorted(set(marks) | {k for k in events if 0 <= k <= iterations}):
         t = time.perf_counter()
         while trainer.step_count < stop:
@@ -545,6 +557,6 @@ def train_with_snapshots(
             t = time.perf_counter()
             mesh = trainer.extract_mesh(mesh_resolution)
             mesh_s = time.perf_counter() - t
-            snaps.append(Snapshot(stop / iterations, trainer.step_count - it0, start_seconds + train_s + event_s + mesh_s, mesh=mesh,
+            snaps.append(Snapshot(stop / iterations, trainer.step_count, start_seconds + train_s + event_s + mesh_s, mesh=mesh,
                                   diagnostics=trainer.diagnostics(mesh)))
     return snaps, train_s, mesh_s
