@@ -72,12 +72,11 @@ def cmd_list(args: argparse.Namespace) -> int:
     for p in sorted(SCENES_DIR.glob("*.yaml")):
         r = load_recipe(p)
         print(f"  {r.name:20s} {r.kind:8s} {r.format}")
+    from bench.machine import cpu_description
     from bench.mkl_dispatch import blas_path, mkl_code_path
 
-    print(f"matrix products: MKL {mkl_code_path()} path (blas: {blas_path()}; bench/mkl_dispatch.py)")
-    from bench.machine import cpu_description
-
     print(f"CPU: {cpu_description()} (recorded in every job row: times depend on it)")
+    print(f"matrix products: MKL {mkl_code_path()} path (blas: {blas_path()}; bench/mkl_dispatch.py)")
     return 0
 
 

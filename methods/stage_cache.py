@@ -21,6 +21,7 @@ import contextvars
 import hashlib
 import io
 import json
+import warnings
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -92,11 +93,16 @@ def _path(key: str) -> Path | None:
 
 
 def load_stage(key: str) -> dict[str, Any] | None:
-    """The stored state for ``key``, or None (no folder, nothing stored)."""
+    """The stored state for ``key``, or None (no folder, nothing stored, or a file torch cannot read: the job then
+    trains the stage itself and stores it anew, with a warning naming the file)."""
     path = _path(key)
     if path is None or not path.is_file():
         return None
-    return torch.load(path, weights_only=False)
+    try:
+        return torch.load(path, weights_only=False)
+    except Exception as exc:  # a damaged file (writes are atomic, but a disk can fail): train instead of failing the job
+        warnings.warn(f"{path}: unreadable stage checkpoint ({type(exc).__name__}: {exc}); training the stage instead")
+        return None
 
 
 def save_stage(key: str, state: dict[str, Any]) -> None:

@@ -28,6 +28,9 @@ def test_store_and_load_need_a_folder(tmp_path: Path):
         save_stage(key, {"x": torch.ones(2)})
         assert torch.equal(load_stage(key)["x"], torch.ones(2))
         assert not [p for p in tmp_path.iterdir() if p.suffix != ".pt"]  # atomic: no temporary left
+        (tmp_path / f"{key}.pt").write_bytes(b"not a checkpoint")  # damaged: warned about, then trained anew
+        with pytest.warns(UserWarning, match="unreadable stage checkpoint"):
+            assert load_stage(key) is None
     assert checkpoint_dir() is None
     with stage_checkpoints(tmp_path, {"blas": "mkl-generic"}):  # the harness's rounding facts enter the key
         assert stage_key({"a": 1}) != key
