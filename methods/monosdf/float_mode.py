@@ -21,13 +21,15 @@ import torch
 from methods.monosdf.grid import _load_extension
 
 
-def set_flush_denormal(on: bool) -> bool:
-    """FTZ / DAZ on or off in the calling thread and, through the extension, in every OpenMP pool thread.
+def set_flush_denormal(on: bool, pool_threads: bool = True) -> bool:
+    """FTZ / DAZ on or off in the calling thread and, through the extension (``pool_threads``), in every OpenMP pool
+    thread. ``pool_threads=False``: the calling thread only, and the C++ extension is not compiled for it (the
+    ``fast_grid: false`` twin runs without C++).
 
-    Returns True when the pool threads were reached, False when only the calling thread was (no extension, or no
-    MXCSR on this CPU)."""
+    Returns True when the pool threads were reached, False when only the calling thread was (not asked, no
+    extension, or no MXCSR on this CPU)."""
     torch.set_flush_denormal(on)
-    ext = _load_extension()
+    ext = _load_extension() if pool_threads else None
     return bool(ext is not None and ext.set_flush_denormal_all_threads(on))
 
 
@@ -46,16 +48,17 @@ def pool_threads_reached() -> bool:
 
 
 @contextlib.contextmanager
-def denormals_flushed(on: bool = True) -> Iterator[None]:
-    """FTZ / DAZ in every compute thread while the block runs (``on``; a no-op when False), IEEE after it.
+def denormals_flushed(on: bool = True, pool_threads: bool = True) -> Iterator[None]:
+    """FTZ / DAZ in every compute thread while the block runs (``on``; a no-op when False), IEEE after it;
+    ``pool_threads=False``: in the calling thread only (:func:`set_flush_denormal`).
 
     The mode is reset to IEEE rather than restored (torch has no call that reads it): left on process-wide, scipy's
     ``cKDTree.query_ball_point`` in a later DTU evaluation crashed (segfault, session 23's CI)."""
     if not on:
         yield
         return
-    set_flush_denormal(True)
+    set_flush_denormal(True, pool_threads)
     try:
         yield
     finally:
-        set_flush_denormal(False)
+        set_flush_denormal(False, pool_threads)

@@ -253,9 +253,10 @@ class MonoSDFTrainer:
         """One optimisation step (:meth:`_step`), with float32 denormals flushed to 0 (FTZ / DAZ) while it runs when
         ``flush_denormals`` is on: arithmetic on denormals takes a slow microcode path, and a sharp field (softplus
         slopes sigmoid(100 z), the products of the backward) produces them; values change only below 1.2e-38
-        (docs/monosdf.md, session 23). The mode is set in the OpenMP pool threads too and reset to IEEE after the
-        step (``float_mode.denormals_flushed``)."""
-        with denormals_flushed(self.cfg.flush_denormals):
+        (docs/monosdf.md, session 23). The mode is set in the OpenMP pool threads too (through the C++ extension:
+        not with ``fast_grid: false``, which runs without C++) and reset to IEEE after the step
+        (``float_mode.denormals_flushed``)."""
+        with denormals_flushed(self.cfg.flush_denormals, pool_threads=self.cfg.fast_grid):  # fast_grid false: no C++ at all
             return self._step(view)
 
     def _step(self, view: int | None = None) -> dict[str, float]:

@@ -52,6 +52,14 @@ def test_calling_thread_alone_leaves_the_pool_ieee(two_threads):
         torch.set_flush_denormal(False)
 
 
+def test_calling_thread_only_when_asked(two_threads):
+    """``pool_threads=False`` (the ``fast_grid: false`` twin, which runs without C++): the calling thread only."""
+    _denormal_survivors()
+    with float_mode.denormals_flushed(pool_threads=False):
+        assert float_mode.flush_denormal_per_thread() == [1, 0]
+    assert float_mode.flush_denormal_per_thread() == [0, 0]
+
+
 def test_off_is_a_no_op(two_threads):
     with float_mode.denormals_flushed(False):
         assert float_mode.flush_denormal_per_thread() == [0, 0]
