@@ -33,7 +33,7 @@ def describe_cpu(cpuinfo_text: str | None, logical_cpus: int | None, fallback: s
     model numbers tell the generation apart."""
     f = _cpuinfo_fields(cpuinfo_text or "")
     name = f.get("model name") or fallback or "unknown CPU"
-    ids = ", ".join(f"{k} {f[k]}" for k in ("cpu family", "model") if k in f).replace("cpu family", "family")
+    ids = ", ".join(f"{label} {f[key]}" for key, label in (("cpu family", "family"), ("model", "model")) if key in f)
     count = f", {logical_cpus} logical CPUs" if logical_cpus else ""
     return f"{name}{f' ({ids})' if ids else ''}{count}"
 

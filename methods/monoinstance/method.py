@@ -35,7 +35,7 @@ from methods.monoinstance.sampling import GuidedSampler
 from methods.monoinstance.stage import run_uncertainty_stage
 from methods.monosdf.config import MonoSDFConfig
 from methods.monosdf.method import set_threads
-from methods.monosdf.trainer import MonoSDFTrainer, train_with_snapshots
+from methods.monosdf.trainer import MonoSDFTrainer, snapshot_steps, train_with_snapshots
 from methods.registry import register
 from methods.stage_cache import checkpoint_dir, load_stage, save_stage, stage_key, tensor_digest
 
@@ -62,9 +62,8 @@ def stage1_key(trainer: MonoSDFTrainer, cfg: MonoInstanceConfig, seed: int, stag
     final phase starting inside stage 1, or no stage 2. Stage 1 is plain MonoSDF whatever the modules: the key holds
     every MonoSDF key of the config (none of MonoInstance's own), the seed, the training data's bytes and the thread
     count, and through ``stage_key`` the matrix-product path the harness passes (both round differently) and the code."""
-    total = cfg.iterations
-    marks = {max(1, int(round(f * total))) for f in cfg.fractions}
-    if checkpoint_dir() is None or min(marks) < stage1_end or final_start <= stage1_end or stage1_end >= total:
+    first_snapshot = snapshot_steps(cfg.iterations, list(cfg.fractions))[0]
+    if checkpoint_dir() is None or first_snapshot < stage1_end or final_start <= stage1_end or stage1_end >= cfg.iterations:
         return None
     rays = trainer.rays
     data = tensor_digest(trainer.rgb, trainer.prior_depth, trainer.prior_normal, trainer.prior_weight, rays.origins, rays.dirs,

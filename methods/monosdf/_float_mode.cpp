@@ -26,11 +26,10 @@ bool this_thread_flushes() { return (_mm_getcsr() & kFtzDaz) == kFtzDaz; }
 #endif
 }  // namespace
 
-// Sets (on) or clears FTZ and DAZ in the calling thread and in every thread of an OpenMP team of
-// omp_get_max_threads() threads; returns false where the CPU has no MXCSR (nothing changed).
+// Sets (on) or clears FTZ and DAZ in every thread of an OpenMP team of omp_get_max_threads() threads, the calling
+// thread included (it is the team's thread 0); returns false where the CPU has no MXCSR (nothing changed).
 bool set_flush_denormal_all_threads(bool on) {
 #ifdef HAVE_MXCSR
-    set_this_thread(on);
 #pragma omp parallel
     { set_this_thread(on); }
     return true;

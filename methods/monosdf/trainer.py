@@ -518,6 +518,12 @@ class MonoSDFTrainer:
         self.load_state_dict(torch.load(path, weights_only=False))
 
 
+def snapshot_steps(iterations: int, fractions: list[float]) -> list[int]:
+    """The step counts at which :func:`train_with_snapshots` extracts a mesh: each fraction of ``iterations``,
+    rounded, at least 1, sorted, without repeats."""
+    return sorted({max(1, int(round(f * iterations))) for f in fractions})
+
+
 def train_with_snapshots(
     trainer: MonoSDFTrainer,
     iterations: int,
@@ -540,7 +546,7 @@ def train_with_snapshots(
         counted), train seconds, mesh seconds of the last snapshot.
     """
     events = dict(events or {})
-    marks = sorted({max(1, int(round(f * iterations))) for f in fractions})
+    marks = snapshot_steps(iterations, fractions)
     snaps: list[Snapshot] = []
     train_s = event_s = mesh_s = 0.0
     for stop in sorted(set(marks) | {k for k in events if 0 <= k <= iterations}):
