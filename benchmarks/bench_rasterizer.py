@@ -6,10 +6,13 @@ the llff_like scenes: f = 110.9 px) at z in [1.5, 6] m, scales log-uniform in [0
 Loss = sum of colour + depth + alpha, so every output is back-propagated.
 
 Figures reported per N: milliseconds for forward, backward and both (median of ``--repeat`` runs after one
-warm-up), candidate pairs (inside 3-sigma boxes), contributing pairs (alpha >= 1/255, before the
-transmittance cut-off) and pairs/s = contributing pairs / (forward + backward) seconds.
+warm-up), candidate pairs (inside 3-sigma boxes), contributing pairs (alpha >= 1/255, up to the
+transmittance cut-off) and pairs/s = contributing pairs / (forward + backward) seconds, for each ``--kernel``:
+``cpp`` (the default path: projection and per-pixel compositing in C++, ``methods/gaussians/raster_kernel.py``) and
+``torch`` (its PyTorch twin).
 
-    python benchmarks/bench_rasterizer.py [--sizes 1000 10000 50000] [--width 128 --height 96] [--repeat 5] [--threads 2]
+    python benchmarks/bench_rasterizer.py [--sizes 1000 10000 50000] [--width 128 --height 96] [--repeat 5] [--threads 1]
+        [--kernel cpp torch]
 """
 
 from __future__ import annotations
@@ -39,7 +42,7 @@ def make_gaussians(n: int, width: int, height: int, focal: float, seed: int = 0)
     return [t.requires_grad_() for t in (means, quats, scales, opac, colors)]
 
 
-def run(n: int, width: int, height: int, repeat: int) -> dict:
+def run(n: int, width: int, height: int, repeat: int, kernel: str) -> dict:
     focal = 110.85 * width / 128
     K = torch.tensor([[focal, 0, (width - 1) / 2], [0, focal, (height - 1) / 2], [0, 0, 1.0]])
     vm = torch.eye(4)
@@ -49,7 +52,7 @@ def run(n: int, width: int, height: int, repeat: int) -> dict:
         for p in params:
             p.grad = None
         t0 = time.perf_counter()
-        out = rasterize_gaussians(*params, vm, K, width, height, background=torch.ones(3))
+        out = rasterize_gaussians(*params, vm, K, width, height, background=torch.ones(3), kernel=kernel)
         t1 = time.perf_counter()
         (out["color"].sum() + out["depth"].sum() + out["alpha"].sum()).backward()
         t2 = time.perf_counter()
@@ -67,14 +70,16 @@ def main() -> None:
     ap.add_argument("--width", type=int, default=128)
     ap.add_argument("--height", type=int, default=96)
     ap.add_argument("--repeat", type=int, default=5)
-    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--threads", type=int, default=1, help="torch threads (the Gaussian configs use 1; the C++ kernels are serial)")
+    ap.add_argument("--kernel", nargs="+", default=["cpp", "torch"], choices=["cpp", "torch"])
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     print(f"torch {torch.__version__}, {args.threads} threads, image {args.width} x {args.height}")
-    print(f"{'N':>7} {'fwd ms':>8} {'bwd ms':>8} {'total ms':>9} {'candidates':>11} {'pairs':>9} {'M pairs/s':>10}")
+    print(f"{'kernel':>6} {'N':>7} {'fwd ms':>8} {'bwd ms':>8} {'total ms':>9} {'candidates':>11} {'pairs':>9} {'M pairs/s':>10}")
     for n in args.sizes:
-        r = run(n, args.width, args.height, args.repeat)
-        print(f"{r['n']:>7} {r['fwd_ms']:>8.1f} {r['bwd_ms']:>8.1f} {r['total_ms']:>9.1f} {r['candidates']:>11} {r['pairs']:>9} {r['pairs_per_s'] / 1e6:>10.2f}")
+        for kernel in args.kernel:
+            r = run(n, args.width, args.height, args.repeat, kernel)
+            print(f"{kernel:>6} {r['n']:>7} {r['fwd_ms']:>8.1f} {r['bwd_ms']:>8.1f} {r['total_ms']:>9.1f} {r['candidates']:>11} {r['pairs']:>9} {r['pairs_per_s'] / 1e6:>10.2f}")
 
 
 if __name__ == "__main__":

@@ -38,6 +38,7 @@ class GaussianConfig:
     init_opacity: Annotated[float, Range(lo=0, hi=1, lo_open=True, hi_open=True)]
     init_max_px: Annotated[float, Positive]
     near: Annotated[float, Positive]
+    raster_kernel: Literal["cpp", "torch"]
     # losses
     lambda_dssim: Annotated[float, Fraction]
     depth_weight: Annotated[float, NonNegative]

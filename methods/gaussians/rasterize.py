@@ -47,6 +47,8 @@ from dataclasses import dataclass
 
 import torch
 
+from methods.gaussians.raster_kernel import composite_cpp, project_cpp, raster_kernel_available
+
 ALPHA_MIN = 1.0 / 255.0
 ALPHA_MAX = 0.99
 T_MIN = 1e-4
@@ -89,7 +91,8 @@ def quat_to_rotmat(quats: torch.Tensor) -> torch.Tensor:
 
 
 def project_gaussians(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor, viewmat: torch.Tensor, K: torch.Tensor,
-                      width: int, height: int, near: float = 0.01, eps2d: float = 0.3, max_scale: float = 1e3) -> Projection:
+                      width: int, height: int, near: float = 0.01, eps2d: float = 0.3, max_scale: float = 1e3,
+                      kernel: str = "torch") -> Projection:
     """EWA projection of 3D Gaussians (step 1 of the module docstring).
 
     Args:
@@ -98,6 +101,9 @@ def project_gaussians(means: torch.Tensor, quats: torch.Tensor, scales: torch.Te
         viewmat: (4, 4) world-to-camera (OpenCV axes). K: (3, 3) intrinsics in pixels.
         width, height: image size in pixels. near: near plane (metres); ``z <= near`` is culled.
         eps2d: dilation of the 2D covariance in px^2. max_scale: upper clamp of the scales (metres).
+        kernel: ``"torch"`` (the PyTorch ops below) or ``"cpp"`` (the same float64 arithmetic per Gaussian in
+            C++ with a hand-derived backward, :func:`methods.gaussians.raster_kernel.project_cpp`; float32
+            inputs only, else the PyTorch ops).
     """
     dtype = means.dtype
     f64 = torch.float64
@@ -109,34 +115,40 @@ def project_gaussians(means: torch.Tensor, quats: torch.Tensor, scales: torch.Te
         visible = torch.isfinite(zc) & (zc > near)
         visible &= torch.isfinite(means.detach()).all(-1) & torch.isfinite(scales.detach()).all(-1) & torch.isfinite(quats.detach()).all(-1)
     ids = torch.nonzero(visible).squeeze(1)
-    m = means[ids].to(f64)
-    pc = m @ R.T + t  # [M, 3]
-    x, y, z = pc.unbind(-1)
     fx, fy, cx, cy = Kd[0, 0], Kd[1, 1], Kd[0, 2], Kd[1, 2]
-    # 3D covariance in the camera frame
-    rot = quat_to_rotmat(quats[ids].to(f64))  # [M, 3, 3]
-    s = scales[ids].to(f64).clamp(0.0, max_scale)
-    M_ = R @ rot * s[:, None, :]  # [M, 3, 3] = R_cw R(q) S
-    cov_cam = M_ @ M_.transpose(1, 2)
-    # perspective Jacobian with the 3DGS clamp of the view-ray slope
+    # limits of the view-ray slope for the perspective Jacobian (3DGS's clamp)
     lim_xp = ((width - 1 - cx) / fx + 0.3 * width / fx).item()
     lim_xn = (cx / fx + 0.3 * width / fx).item()
     lim_yp = ((height - 1 - cy) / fy + 0.3 * height / fy).item()
     lim_yn = (cy / fy + 0.3 * height / fy).item()
-    tx = z * (x / z).clamp(-lim_xn, lim_xp)
-    ty = z * (y / z).clamp(-lim_yn, lim_yp)
-    zero = torch.zeros_like(z)
-    J = torch.stack([fx / z, zero, -fx * tx / (z * z), zero, fy / z, -fy * ty / (z * z)], -1).reshape(-1, 2, 3)
-    cov2d = J @ cov_cam @ J.transpose(1, 2)
-    a = cov2d[:, 0, 0] + eps2d
-    b = cov2d[:, 0, 1]
-    c = cov2d[:, 1, 1] + eps2d
-    det = (a * c - b * b).clamp_min(1e-12)
-    conics = torch.stack([c / det, -b / det, a / det], -1)
-    u = fx * x / z + cx
-    v = fy * y / z + cy
-    means2d_vis = torch.stack([u, v], -1)
-    ext = 3.0 * torch.stack([a, c], -1).sqrt()
+    if kernel == "cpp" and dtype == torch.float32 and raster_kernel_available():
+        cam = torch.cat([R.reshape(9), t, torch.stack([fx, fy, cx, cy]),
+                         torch.tensor([lim_xn, lim_xp, lim_yn, lim_yp, eps2d, max_scale], dtype=f64)])
+        means2d_vis, conics, z, ext = project_cpp(means[ids], quats[ids], scales[ids], cam)
+    else:
+        m = means[ids].to(f64)
+        pc = m @ R.T + t  # [M, 3]
+        x, y, z = pc.unbind(-1)
+        # 3D covariance in the camera frame
+        rot = quat_to_rotmat(quats[ids].to(f64))  # [M, 3, 3]
+        s = scales[ids].to(f64).clamp(0.0, max_scale)
+        M_ = R @ rot * s[:, None, :]  # [M, 3, 3] = R_cw R(q) S
+        cov_cam = M_ @ M_.transpose(1, 2)
+        # perspective Jacobian with the clamped view-ray slope
+        tx = z * (x / z).clamp(-lim_xn, lim_xp)
+        ty = z * (y / z).clamp(-lim_yn, lim_yp)
+        zero = torch.zeros_like(z)
+        J = torch.stack([fx / z, zero, -fx * tx / (z * z), zero, fy / z, -fy * ty / (z * z)], -1).reshape(-1, 2, 3)
+        cov2d = J @ cov_cam @ J.transpose(1, 2)
+        a = cov2d[:, 0, 0] + eps2d
+        b = cov2d[:, 0, 1]
+        c = cov2d[:, 1, 1] + eps2d
+        det = (a * c - b * b).clamp_min(1e-12)
+        conics = torch.stack([c / det, -b / det, a / det], -1)
+        u = fx * x / z + cx
+        v = fy * y / z + cy
+        means2d_vis = torch.stack([u, v], -1)
+        ext = 3.0 * torch.stack([a, c], -1).sqrt()
     N = means.shape[0]
     means2d = torch.zeros(N, 2, dtype=dtype, device=means.device).index_copy(0, ids, means2d_vis.to(dtype))
     radii = torch.zeros(N, dtype=dtype, device=means.device)
@@ -189,7 +201,7 @@ def _segment_exclusive_logT(log1m: torch.Tensor, pix: torch.Tensor) -> torch.Ten
 def rasterize_gaussians(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor, opacities: torch.Tensor, colors: torch.Tensor,
                         viewmat: torch.Tensor, K: torch.Tensor, width: int, height: int, background: torch.Tensor | None = None,
                         near: float = 0.01, eps2d: float = 0.3, t_min: float = T_MIN, max_pairs: int = 4_000_000,
-                        max_scale: float = 1e3) -> dict[str, torch.Tensor | Projection | int]:
+                        max_scale: float = 1e3, kernel: str = "cpp") -> dict[str, torch.Tensor | Projection | int]:
     """Render colour, z-depth and alpha of N 3D Gaussians in one pinhole view (see the module docstring).
 
     Args:
@@ -202,7 +214,10 @@ def rasterize_gaussians(means: torch.Tensor, quats: torch.Tensor, scales: torch.
         width, height: image size (pixels).
         background: (C,) colour behind everything (default 0).
         near: near plane (metres). eps2d: 2D dilation (px^2). t_min: transmittance cut-off.
-        max_pairs: bound on the candidate pairs generated at once (row bands are processed separately).
+        max_pairs: bound on the candidate pairs generated at once (row bands are processed separately; PyTorch path only).
+        kernel: ``"cpp"`` (default): steps 2-6 in one C++ pass per pixel (:mod:`methods.gaussians.raster_kernel`,
+            float32 only, falls back to the PyTorch path without a compiler); ``"torch"``: the PyTorch path below,
+            the kernel's twin.
 
     Returns:
         dict with ``color`` (H, W, C), ``depth`` (H, W) accumulated z-depth ``sum w z``, ``alpha`` (H, W)
@@ -219,7 +234,7 @@ def rasterize_gaussians(means: torch.Tensor, quats: torch.Tensor, scales: torch.
     dtype = means.dtype
     C = colors.shape[1]
     HW = width * height
-    proj = project_gaussians(means, quats, scales, viewmat, K, width, height, near=near, eps2d=eps2d, max_scale=max_scale)
+    proj = project_gaussians(means, quats, scales, viewmat, K, width, height, near=near, eps2d=eps2d, max_scale=max_scale, kernel=kernel)
     ids = proj.ids
     M = ids.numel()
     opac_v = opacities[ids]
@@ -228,6 +243,13 @@ def rasterize_gaussians(means: torch.Tensor, quats: torch.Tensor, scales: torch.
     # depth rank (stable) so the sort key is (pixel, depth, index)
     with torch.no_grad():
         order = torch.sort(proj.depths.detach(), stable=True).indices
+    if kernel not in ("cpp", "torch"):
+        raise ValueError(f"kernel must be 'cpp' or 'torch', got {kernel!r}")
+    if kernel == "cpp" and dtype == torch.float32 and raster_kernel_available():
+        out, n_pairs, n_cand = composite_cpp(m2d_v, proj.conics, opac_v, proj.depths, col_v, order, proj.extents.to(dtype), width,
+                                             height, t_min)
+        return _outputs(out, background, proj, n_pairs, n_cand, width, height)
+    with torch.no_grad():
         rank = torch.empty_like(order)
         rank[order] = torch.arange(M)
         u0 = m2d_v[:, 0].detach()
@@ -274,8 +296,14 @@ def rasterize_gaussians(means: torch.Tensor, quats: torch.Tensor, scales: torch.
     T = torch.exp(_segment_exclusive_logT(torch.log1p(-alpha), pix)).to(dtype)
     w = alpha * T
     out = torch.zeros(HW, 2 + C, dtype=dtype).index_add(0, pix, torch.stack([w, w * gz] + [w * c for c in gc], 1))
+    return _outputs(out, background, proj, int(g.numel()), n_cand, width, height)
+
+
+def _outputs(out: torch.Tensor, background: torch.Tensor | None, proj: Projection, n_pairs: int, n_cand: int, width: int,
+             height: int) -> dict[str, torch.Tensor | Projection | int]:
+    """The result dict from the (HW, 2 + C) per-pixel rows ``[sum w, sum w z, sum w c]`` (step 6's background)."""
     acc, dep, col = out[:, 0], out[:, 1], out[:, 2:]
     if background is not None:
-        col = col + (1.0 - acc)[:, None] * background.to(dtype)[None, :]
-    return {"color": col.reshape(height, width, C), "depth": dep.reshape(height, width), "alpha": acc.reshape(height, width),
-            "proj": proj, "n_pairs": int(g.numel()), "n_candidates": n_cand}
+        col = col + (1.0 - acc)[:, None] * background.to(out.dtype)[None, :]
+    return {"color": col.reshape(height, width, -1), "depth": dep.reshape(height, width), "alpha": acc.reshape(height, width),
+            "proj": proj, "n_pairs": n_pairs, "n_candidates": n_cand}

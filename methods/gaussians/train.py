@@ -96,7 +96,7 @@ def train_gaussians(scene: Scene, cfg: GaussianConfig, seed: int, progress: Call
     images = torch.tensor(scene.images, dtype=torch.float32)
     mono = torch.tensor(scene.mono_depth, dtype=torch.float32) if scene.mono_depth is not None else None
     bg = torch.zeros(3)
-    rkw = {"near": cfg.near}
+    rkw: dict[str, Any] = {"near": cfg.near, "kernel": cfg.raster_kernel}
     timings["init"] = time.perf_counter() - t0
 
     depth_loss = cfg.depth_loss  # none | pearson (checked by GaussianConfig)

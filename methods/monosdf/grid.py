@@ -23,14 +23,12 @@ from __future__ import annotations
 
 import contextlib
 import math
-import os
-import threading
-import time
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Iterator
 
 import torch
+
+from methods.cpp_build import CppExtension, build_lock  # noqa: F401  (build_lock: re-exported for the tests)
 
 PRIMES = (1, 2654435761, 805459861)
 
@@ -135,68 +133,14 @@ def interpolate_reference(table: torch.Tensor, x: torch.Tensor, spec: GridSpec, 
 
 
 # ----------------------------------------------------------------------------- fast path
-_EXT = None
-_EXT_LOCK = threading.Lock()
-_EXT_FAILED = False
-
-
 EXT_NAME = "monosdf_grid_kernel"
-BUILD_LOCK_TIMEOUT_S = float(os.environ.get("BENCH_BUILD_LOCK_TIMEOUT", "900"))
-
-
-@contextlib.contextmanager
-def build_lock(build_dir: Path, timeout_s: float = BUILD_LOCK_TIMEOUT_S) -> Iterator[None]:
-    """Hold an exclusive ``flock`` on ``build_dir/bench-build.lock`` while torch builds / loads the kernel.
-
-    torch's own build lock is a plain file (``build_dir/lock``) that a killed build leaves behind, after
-    which every later build waits for it forever. The kernel releases a ``flock`` when its holder dies,
-    so while we hold ours no other bench process is building: a torch ``lock`` file found then is stale
-    and is removed. Waits at most ``timeout_s`` for a live build of another process, then raises
-    ``TimeoutError`` naming the lock file.
-    """
-    import fcntl
-
-    build_dir.mkdir(parents=True, exist_ok=True)
-    path = build_dir / "bench-build.lock"
-    with open(path, "a+") as fh:
-        deadline = time.monotonic() + timeout_s
-        while True:
-            try:
-                fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                break
-            except BlockingIOError:
-                if time.monotonic() > deadline:
-                    raise TimeoutError(f"{path}: another process has been building the grid kernel for over "
-                                       f"{timeout_s:.0f} s (BENCH_BUILD_LOCK_TIMEOUT)") from None
-                time.sleep(0.5)
-        try:
-            (build_dir / "lock").unlink(missing_ok=True)  # a dead build's torch lock: nobody else is building
-            yield
-        finally:
-            fcntl.flock(fh, fcntl.LOCK_UN)
+_KERNEL = CppExtension(EXT_NAME, __file__, ("_grid_kernel.cpp", "_encoding_kernel.cpp", "_float_mode.cpp"),
+                       cflags=("-O3", "-fopenmp", "-march=native", "-ffast-math"), ldflags=("-fopenmp",))
 
 
 def _load_extension():
     """Compile (first use) and load the C++ kernel; None if no compiler is available."""
-    global _EXT, _EXT_FAILED
-    if _EXT is not None or _EXT_FAILED:
-        return _EXT
-    with _EXT_LOCK:
-        if _EXT is None and not _EXT_FAILED:
-            try:
-                from torch.utils.cpp_extension import _get_build_directory, load
-
-                src = [str(Path(__file__).with_name(name)) for name in ("_grid_kernel.cpp", "_encoding_kernel.cpp", "_float_mode.cpp")]
-                verbose = os.environ.get("BENCH_VERBOSE_BUILD") == "1"
-                with build_lock(Path(_get_build_directory(EXT_NAME, verbose))):
-                    _EXT = load(name=EXT_NAME, sources=src, extra_cflags=["-O3", "-fopenmp", "-march=native", "-ffast-math"],
-                                extra_ldflags=["-fopenmp"], verbose=verbose)
-            except Exception as exc:  # no compiler / headers: use the reference path
-                import warnings
-
-                warnings.warn(f"grid kernel unavailable ({exc}); using the pure-PyTorch reference path")
-                _EXT_FAILED = True
-    return _EXT
+    return _KERNEL.load()
 
 
 class _GridFunction(torch.autograd.Function):

@@ -95,3 +95,22 @@ def test_zero_padded_ssim_matches_fsgs_and_differs_from_valid():
     assert ssim(a, a, padding="zero").mean == pytest.approx(1.0)
     with pytest.raises(ValueError, match="padding"):
         ssim(a, a, padding="reflect")
+
+
+@pytest.mark.parametrize("padding", ["zero", "valid"])
+def test_separable_ssim_map_matches_the_2d_window_twin_with_gradients(padding):
+    """The separable SSIM map (the metric and the Gaussian variants' loss) against one 2-D convolution per
+    moment: values and the gradient of the mean (float32 and float64)."""
+    from metrics.image import gaussian_ssim_map, gaussian_ssim_map_reference
+
+    g = torch.Generator().manual_seed(3)
+    for dtype, tol in ((torch.float32, 2e-5), (torch.float64, 1e-12)):
+        p = torch.rand(2, 3, 40, 53, generator=g, dtype=dtype).requires_grad_(True)
+        t = (p.detach() + 0.1 * torch.randn(p.shape, generator=g, dtype=dtype)).clamp(0, 1)
+        a = gaussian_ssim_map(p, t, padding=padding)
+        (ga,) = torch.autograd.grad(a.mean(), p)
+        b = gaussian_ssim_map_reference(p, t, padding=padding)
+        (gb,) = torch.autograd.grad(b.mean(), p)
+        assert a.shape == b.shape
+        assert (a - b).abs().max().item() < tol
+        assert (ga - gb).abs().max().item() < tol * gb.abs().max().item() * 10
