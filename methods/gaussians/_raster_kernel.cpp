@@ -3,7 +3,7 @@
 //
 // Forward: every visible Gaussian covers the pixel centres inside its 3-sigma box (integer bounds computed
 // with the same float32 operations as the PyTorch path). A counting pass gives every pixel a slot range for
-// its candidates; the Gaussians, visited in depth order (the caller's stable depth sort), write their pairs
+// its candidates; the Gaussians, visited in depth order (a stable sort: ties by index, as the twin), write their pairs
 // into those ranges, so each pixel's list is front to back without a sort and no pixel tests a Gaussian
 // that does not cover it (a tiled walk measured 3x slower: its box tests mispredict). Per pair
 // alpha = min(0.99, o exp(min(power, 0))) with
@@ -13,13 +13,16 @@
 // sums float32 log1p(-alpha) in float64 and exponentiates: the same to float32 rounding, two transcendental
 // calls per pair fewer). A pixel stops at the first pair with T (1 - alpha) < t_min (3DGS's cut-off,
 // the twin's prefix rule). Output rows per pixel: [sum w, sum w z, sum w c_0 .. c_{C-1}], w = alpha T.
-// The surviving pairs (Gaussian, T as float32), pixel by pixel front to back, are returned for the backward.
+// Every slot keeps (Gaussian, o exp(power) before the 0.99 clamp, T as float32) for the backward, pixel by
+// pixel front to back.
 //
 // Backward (one pass per pixel, back to front): with G_i = g . [1, z_i, c_i] the output gradient seen by
 // pair i and S_i = sum_{k > i} w_k G_k, dL/dalpha_i = T_i G_i - S_i / (1 - alpha_i) (every later T_k holds
 // the factor 1 - alpha_i); then through the clamps (a gradient passes where the clamped value is <= its
 // bound, as torch's clamp_max), the exponential and the quadratic form to o, the conic (A, B, C) and the
-// screen-space centre (u, v). Gradients are summed per Gaussian in float64.
+// screen-space centre (u, v); d alpha / d o = exp(power) is read back as the stored o exp(power) / o (no
+// exponential in the backward). The inputs and the float64 gradient sums are packed per Gaussian (one or two
+// cache lines per pair instead of ten arrays: measured 16.5 -> 9.5 ms for 267k pairs on a loaded machine).
 #include <torch/extension.h>
 
 #include <algorithm>
@@ -56,11 +59,12 @@ inline float pair_power(float A, float B, float C, float dx, float dy) {
 
 }  // namespace
 
-// Returns (out (HW, 2 + C) float32, slot_gaussian (S,) int32, slot_T (S,) float32, pixel_start (HW,) int64,
+// Returns (out (HW, 2 + C) float32, slot_gaussian (S,) int32, slot_alpha_raw (S,) float32, slot_T (S,) float32,
+// pixel_start (HW,) int64,
 // pixel_count (HW,) int32, stats (2,) int64 = [contributing pairs, candidate pairs]): pixel p's contributing
 // pairs, front to back, are the slots pixel_start[p] .. pixel_start[p] + pixel_count[p] - 1.
 std::vector<torch::Tensor> raster_forward(torch::Tensor means2d, torch::Tensor conics, torch::Tensor opacities, torch::Tensor depths,
-                                          torch::Tensor colors, torch::Tensor order, torch::Tensor extents, int64_t width,
+                                          torch::Tensor colors, torch::Tensor extents, int64_t width,
                                           int64_t height, double t_min) {
   TORCH_CHECK(means2d.dtype() == torch::kFloat32 && means2d.is_contiguous(), "means2d: contiguous float32 (M, 2)");
   const int64_t M = means2d.size(0);
@@ -72,9 +76,12 @@ std::vector<torch::Tensor> raster_forward(torch::Tensor means2d, torch::Tensor c
   const float* op = opacities.data_ptr<float>();
   const float* z = depths.data_ptr<float>();
   const float* col = colors.data_ptr<float>();
-  const int64_t* ord = order.data_ptr<int64_t>();
   const float* ext = extents.data_ptr<float>();
 
+  // the Gaussians by increasing depth, ties by index (the twin's stable torch.sort)
+  std::vector<int64_t> ord(M);
+  for (int64_t g = 0; g < M; ++g) ord[g] = g;
+  std::stable_sort(ord.begin(), ord.end(), [z](int64_t i, int64_t j) { return z[i] < z[j]; });
   std::vector<Box> box(M);
   for (int64_t g = 0; g < M; ++g) box[g] = pixel_box(m2[2 * g], m2[2 * g + 1], ext[2 * g], ext[2 * g + 1], W, H);
   // 1. candidates per pixel (pixel centres inside a box), as offsets of each pixel's slot range
@@ -96,9 +103,11 @@ std::vector<torch::Tensor> raster_forward(torch::Tensor means2d, torch::Tensor c
   // 2. each pixel's list in depth order (Gaussians visited by the caller's stable depth sort): the Gaussian
   // and its alpha, for the pairs with alpha >= 1/255
   auto buf_g = torch::empty({n_cand}, torch::kInt32);
-  auto buf_v = torch::empty({n_cand}, torch::kFloat32);
+  auto buf_a = torch::empty({n_cand}, torch::kFloat32);  // o exp(power) before the clamp at 0.99
+  auto buf_T = torch::empty({n_cand}, torch::kFloat32);  // T in front of the pair (contributing pairs only)
   int32_t* bg = buf_g.data_ptr<int32_t>();
-  float* bv = buf_v.data_ptr<float>();
+  float* ba = buf_a.data_ptr<float>();
+  float* bT = buf_T.data_ptr<float>();
   std::fill(n_slot.begin(), n_slot.end(), 0);
   for (int64_t k = 0; k < M; ++k) {
     const int64_t g = ord[k];
@@ -108,16 +117,16 @@ std::vector<torch::Tensor> raster_forward(torch::Tensor means2d, torch::Tensor c
       const float dy = static_cast<float>(y) - v0;
       for (int x = b.x0; x <= b.x1; ++x) {
         const float dx = static_cast<float>(x) - u0;
-        const float alpha = std::min(o_g * std::exp(std::min(pair_power(A, B, Cc, dx, dy), 0.f)), ALPHA_MAX);
-        if (!(alpha >= ALPHA_MIN)) continue;
+        const float a_raw = o_g * std::exp(std::min(pair_power(A, B, Cc, dx, dy), 0.f));
+        if (!(std::min(a_raw, ALPHA_MAX) >= ALPHA_MIN)) continue;
         const int64_t pix = static_cast<int64_t>(y) * W + x;
         const int64_t slot = ps[pix] + n_slot[pix]++;
         bg[slot] = static_cast<int32_t>(g);
-        bv[slot] = alpha;
+        ba[slot] = a_raw;
       }
     }
   }
-  // 3. front-to-back compositing; a kept pair's alpha slot is overwritten with its T (float32) for the backward
+  // 3. front-to-back compositing; a kept pair's T (float32) is stored for the backward
   auto out = torch::zeros({HW, 2 + C}, torch::kFloat32);
   auto pix_count = torch::zeros({HW}, torch::kInt32);
   float* o = out.data_ptr<float>();
@@ -130,7 +139,7 @@ std::vector<torch::Tensor> raster_forward(torch::Tensor means2d, torch::Tensor c
     for (int32_t j = 0; j < n_slot[pix]; ++j) {
       const int64_t slot = ps[pix] + j;
       const int32_t g = bg[slot];
-      const float alpha = bv[slot];
+      const float alpha = std::min(ba[slot], ALPHA_MAX);
       const double after = T * (1.0 - static_cast<double>(alpha));
       if (!(after >= t_min)) break;  // T only falls further: every later pair of this pixel is cut off too
       const float Tf = static_cast<float>(T);
@@ -138,7 +147,7 @@ std::vector<torch::Tensor> raster_forward(torch::Tensor means2d, torch::Tensor c
       row[0] += w;
       row[1] += w * z[g];
       for (int64_t c = 0; c < C; ++c) row[2 + c] += w * col[g * C + c];
-      bv[slot] = Tf;
+      bT[slot] = Tf;
       ++count;
       T = after;
     }
@@ -146,29 +155,41 @@ std::vector<torch::Tensor> raster_forward(torch::Tensor means2d, torch::Tensor c
     n_pairs += count;
   }
   auto stats = torch::tensor({n_pairs, n_cand}, torch::kInt64);
-  return {out, buf_g, buf_v, pix_start, pix_count, stats};
+  return {out, buf_g, buf_a, buf_T, pix_start, pix_count, stats};
 }
 
 // Returns the gradients of (means2d (M, 2), conics (M, 3), opacities (M,), depths (M,), colors (M, C)).
 std::vector<torch::Tensor> raster_backward(torch::Tensor grad_out, torch::Tensor means2d, torch::Tensor conics, torch::Tensor opacities,
-                                           torch::Tensor depths, torch::Tensor colors, torch::Tensor pair_g, torch::Tensor pair_T,
-                                           torch::Tensor pix_start, torch::Tensor pix_count, int64_t width) {
+                                           torch::Tensor depths, torch::Tensor colors, torch::Tensor slot_g, torch::Tensor slot_a,
+                                           torch::Tensor slot_T, torch::Tensor pix_start, torch::Tensor pix_count, int64_t width) {
   const int64_t M = means2d.size(0);
   const int64_t C = colors.size(1);
   const int64_t HW = pix_start.size(0);
   const int W = static_cast<int>(width);
   const float* go = grad_out.data_ptr<float>();
-  const float* m2 = means2d.data_ptr<float>();
-  const float* con = conics.data_ptr<float>();
-  const float* op = opacities.data_ptr<float>();
-  const float* z = depths.data_ptr<float>();
-  const float* col = colors.data_ptr<float>();
-  const int32_t* pg = pair_g.data_ptr<int32_t>();
-  const float* pT = pair_T.data_ptr<float>();
+  const int32_t* sg = slot_g.data_ptr<int32_t>();
+  const float* sa = slot_a.data_ptr<float>();
+  const float* sT = slot_T.data_ptr<float>();
   const int64_t* ps = pix_start.data_ptr<int64_t>();
   const int32_t* pc = pix_count.data_ptr<int32_t>();
-
-  std::vector<double> d_m2(2 * M, 0.0), d_con(3 * M, 0.0), d_op(M, 0.0), d_z(M, 0.0), d_col(M * C, 0.0);
+  // per Gaussian, packed so that a pair touches one or two cache lines: [u, v, A, B, C, o, z, c_0 .. c_{C-1}]
+  const int64_t D = 7 + C;
+  std::vector<float> par(M * D);
+  {
+    const float* m2 = means2d.data_ptr<float>();
+    const float* con = conics.data_ptr<float>();
+    const float* op = opacities.data_ptr<float>();
+    const float* z = depths.data_ptr<float>();
+    const float* col = colors.data_ptr<float>();
+    for (int64_t g = 0; g < M; ++g) {
+      float* p = par.data() + g * D;
+      p[0] = m2[2 * g]; p[1] = m2[2 * g + 1];
+      p[2] = con[3 * g]; p[3] = con[3 * g + 1]; p[4] = con[3 * g + 2];
+      p[5] = op[g]; p[6] = z[g];
+      for (int64_t c = 0; c < C; ++c) p[7 + c] = col[g * C + c];
+    }
+  }
+  std::vector<double> acc(M * D, 0.0);  // the gradients, same layout
   for (int64_t pix = 0; pix < HW; ++pix) {
     const int32_t n = pc[pix];
     if (n == 0) continue;
@@ -177,41 +198,50 @@ std::vector<torch::Tensor> raster_backward(torch::Tensor grad_out, torch::Tensor
     double S = 0.0;  // sum over the pairs behind this one of w_k G_k
     for (int32_t j = n - 1; j >= 0; --j) {
       const int64_t k = ps[pix] + j;
-      const int32_t g = pg[k];
-      const double T = pT[k];
-      const float dx = px - m2[2 * g];
-      const float dy = py - m2[2 * g + 1];
-      const float A = con[3 * g], B = con[3 * g + 1], Cc = con[3 * g + 2];
-      const float power_raw = pair_power(A, B, Cc, dx, dy);
-      const float e = std::exp(std::min(power_raw, 0.f));
-      const float a_raw = op[g] * e;
+      const int32_t g = sg[k];
+      const float* p = par.data() + g * D;
+      double* d = acc.data() + g * D;
+      const double T = sT[k];
+      const float a_raw = sa[k];
       const float alpha = std::min(a_raw, ALPHA_MAX);
       const double w = static_cast<double>(alpha) * T;
-      double G = g_row[0] + static_cast<double>(g_row[1]) * z[g];
-      for (int64_t c = 0; c < C; ++c) G += static_cast<double>(g_row[2 + c]) * col[g * C + c];
-      d_z[g] += static_cast<double>(g_row[1]) * w;
-      for (int64_t c = 0; c < C; ++c) d_col[g * C + c] += static_cast<double>(g_row[2 + c]) * w;
+      double G = g_row[0] + static_cast<double>(g_row[1]) * p[6];
+      for (int64_t c = 0; c < C; ++c) G += static_cast<double>(g_row[2 + c]) * p[7 + c];
+      d[6] += static_cast<double>(g_row[1]) * w;
+      for (int64_t c = 0; c < C; ++c) d[7 + c] += static_cast<double>(g_row[2 + c]) * w;
       const double d_alpha = T * G - S / (1.0 - static_cast<double>(alpha));
       S += w * G;
       if (!(a_raw <= ALPHA_MAX)) continue;  // clamped at 0.99: no gradient to o or the power
-      d_op[g] += d_alpha * e;
-      if (!(power_raw <= 0.f)) continue;
+      d[5] += d_alpha * (static_cast<double>(a_raw) / p[5]);  // d alpha / d o = exp(power) = a_raw / o (o >= 1/255 here)
+      const float dx = px - p[0];
+      const float dy = py - p[1];
+      const float A = p[2], B = p[3], Cc = p[4];
+      if (!(pair_power(A, B, Cc, dx, dy) <= 0.f)) continue;  // power clamped at 0
       const double d_power = d_alpha * a_raw;
-      d_con[3 * g] += d_power * (-0.5 * dx * dx);
-      d_con[3 * g + 1] += d_power * (-static_cast<double>(dx) * dy);
-      d_con[3 * g + 2] += d_power * (-0.5 * dy * dy);
+      d[2] += d_power * (-0.5 * dx * dx);
+      d[3] += d_power * (-static_cast<double>(dx) * dy);
+      d[4] += d_power * (-0.5 * dy * dy);
       // power depends on dx = px - u and dy = py - v
-      d_m2[2 * g] += d_power * (static_cast<double>(A) * dx + static_cast<double>(B) * dy);
-      d_m2[2 * g + 1] += d_power * (static_cast<double>(B) * dx + static_cast<double>(Cc) * dy);
+      d[0] += d_power * (static_cast<double>(A) * dx + static_cast<double>(B) * dy);
+      d[1] += d_power * (static_cast<double>(B) * dx + static_cast<double>(Cc) * dy);
     }
   }
-  auto to_tensor = [](const std::vector<double>& v, std::vector<int64_t> shape) {
-    auto t = torch::empty(shape, torch::kFloat32);
-    float* p = t.data_ptr<float>();
-    for (size_t i = 0; i < v.size(); ++i) p[i] = static_cast<float>(v[i]);
-    return t;
-  };
-  return {to_tensor(d_m2, {M, 2}), to_tensor(d_con, {M, 3}), to_tensor(d_op, {M}), to_tensor(d_z, {M}), to_tensor(d_col, {M, C})};
+  auto d_m2 = torch::empty({M, 2}, torch::kFloat32);
+  auto d_con = torch::empty({M, 3}, torch::kFloat32);
+  auto d_op = torch::empty({M}, torch::kFloat32);
+  auto d_z = torch::empty({M}, torch::kFloat32);
+  auto d_col = torch::empty({M, C}, torch::kFloat32);
+  float *o2 = d_m2.data_ptr<float>(), *oc = d_con.data_ptr<float>(), *oo = d_op.data_ptr<float>(), *oz = d_z.data_ptr<float>(),
+        *ocol = d_col.data_ptr<float>();
+  for (int64_t g = 0; g < M; ++g) {
+    const double* d = acc.data() + g * D;
+    o2[2 * g] = static_cast<float>(d[0]); o2[2 * g + 1] = static_cast<float>(d[1]);
+    for (int i = 0; i < 3; ++i) oc[3 * g + i] = static_cast<float>(d[2 + i]);
+    oo[g] = static_cast<float>(d[5]);
+    oz[g] = static_cast<float>(d[6]);
+    for (int64_t c = 0; c < C; ++c) ocol[g * C + c] = static_cast<float>(d[7 + c]);
+  }
+  return {d_m2, d_con, d_op, d_z, d_col};
 }
 
 // ------------------------------------------------------------------------------------------------ projection

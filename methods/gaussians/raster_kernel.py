@@ -28,13 +28,13 @@ class _RasterFunction(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor, depths: torch.Tensor,  # type: ignore[override]
-                colors: torch.Tensor, order: torch.Tensor, extents: torch.Tensor, width: int, height: int, t_min: float):
+                colors: torch.Tensor, extents: torch.Tensor, width: int, height: int, t_min: float):
         ext = _KERNEL.load()
         assert ext is not None  # callers check raster_kernel_available()
         args = [t.detach().contiguous() for t in (means2d, conics, opacities, depths, colors)]
-        out, slot_g, slot_T, pix_start, pix_count, stats = ext.raster_forward(*args, order.contiguous(), extents.contiguous(), width,
-                                                                              height, t_min)
-        ctx.save_for_backward(*args, slot_g, slot_T, pix_start, pix_count)
+        out, slot_g, slot_a, slot_T, pix_start, pix_count, stats = ext.raster_forward(*args, extents.contiguous(),
+                                                                                      width, height, t_min)
+        ctx.save_for_backward(*args, slot_g, slot_a, slot_T, pix_start, pix_count)
         ctx.width = width
         ctx.mark_non_differentiable(stats)
         return out, stats
@@ -43,26 +43,24 @@ class _RasterFunction(torch.autograd.Function):
     def backward(ctx, grad_out: torch.Tensor, _grad_stats: torch.Tensor):  # type: ignore[override]
         ext = _KERNEL.load()
         assert ext is not None
-        m2d, conics, opac, depths, colors, pair_g, pair_T, pix_start, pix_count = ctx.saved_tensors
-        grads = ext.raster_backward(grad_out.contiguous(), m2d, conics, opac, depths, colors, pair_g, pair_T, pix_start, pix_count, ctx.width)
-        return (*grads, None, None, None, None, None)
+        grads = ext.raster_backward(grad_out.contiguous(), *ctx.saved_tensors, ctx.width)
+        return (*grads, None, None, None, None)
 
 
 def composite_cpp(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor, depths: torch.Tensor, colors: torch.Tensor,
-                  order: torch.Tensor, extents: torch.Tensor, width: int, height: int, t_min: float) -> tuple[torch.Tensor, int, int]:
+                  extents: torch.Tensor, width: int, height: int, t_min: float) -> tuple[torch.Tensor, int, int]:
     """Composite M projected Gaussians into a ``width`` x ``height`` image (float32, differentiable).
 
     Args:
         means2d: (M, 2) pixel centres (u, v). conics: (M, 3) ``(A, B, C)`` of the inverse 2D covariance.
-        opacities: (M,) in [0, 1]. depths: (M,) camera z (metres). colors: (M, C).
-        order: (M,) int64 indices of the Gaussians by increasing depth (stable: ties by index).
+        opacities: (M,) in [0, 1]. depths: (M,) camera z (metres; composited front to back, ties by index). colors: (M, C).
         extents: (M, 2) half-widths of the 3-sigma boxes in pixels. t_min: transmittance cut-off.
 
     Returns:
         (HW, 2 + C) rows ``[sum w, sum w z, sum w c]`` per pixel (row-major pixels), the number of
         contributing pairs and the number of candidate pairs (pixel centres inside the boxes).
     """
-    out, stats = _RasterFunction.apply(means2d, conics, opacities, depths, colors, order, extents, width, height, t_min)
+    out, stats = _RasterFunction.apply(means2d, conics, opacities, depths, colors, extents, width, height, t_min)
     return out, int(stats[0]), int(stats[1])
 
 

@@ -1,4 +1,8 @@
-"""Differentiable 3D Gaussian rasteriser for the CPU, in pure PyTorch (the fast path).
+"""Differentiable 3D Gaussian rasteriser for the CPU: the PyTorch path, and the entry point of the C++ one.
+
+``kernel="cpp"`` (the default for float32) runs the projection and steps 2-6 as C++ kernels with hand-derived
+backwards (:mod:`methods.gaussians.raster_kernel`); the PyTorch ops below (``kernel="torch"``, and float64)
+are their twin in the tests. The algorithm below is what both compute.
 
 Conventions (as everywhere in the project, see ``bench/data/scene.py``): ``viewmat`` is the (4, 4)
 WORLD-TO-CAMERA matrix with OpenCV axes (x right, y down, z forward), world units metres; ``K`` is the
@@ -223,6 +227,8 @@ def rasterize_gaussians(means: torch.Tensor, quats: torch.Tensor, scales: torch.
         dict with ``color`` (H, W, C), ``depth`` (H, W) accumulated z-depth ``sum w z``, ``alpha`` (H, W)
         ``sum w``, ``proj`` (:class:`Projection`), ``n_pairs`` (contributing pairs) and ``n_candidates``.
     """
+    if kernel not in ("cpp", "torch"):
+        raise ValueError(f"kernel must be 'cpp' or 'torch', got {kernel!r}")
     if means.ndim != 2 or means.shape[1] != 3:
         raise ValueError(f"means must be (N, 3), got {tuple(means.shape)}")
     N = means.shape[0]
@@ -240,16 +246,12 @@ def rasterize_gaussians(means: torch.Tensor, quats: torch.Tensor, scales: torch.
     opac_v = opacities[ids]
     col_v = colors[ids]
     m2d_v = proj.means2d[ids]
+    if kernel == "cpp" and dtype == torch.float32 and raster_kernel_available():
+        out, n_pairs, n_cand = composite_cpp(m2d_v, proj.conics, opac_v, proj.depths, col_v, proj.extents.to(dtype), width, height, t_min)
+        return _outputs(out, background, proj, n_pairs, n_cand, width, height)
     # depth rank (stable) so the sort key is (pixel, depth, index)
     with torch.no_grad():
         order = torch.sort(proj.depths.detach(), stable=True).indices
-    if kernel not in ("cpp", "torch"):
-        raise ValueError(f"kernel must be 'cpp' or 'torch', got {kernel!r}")
-    if kernel == "cpp" and dtype == torch.float32 and raster_kernel_available():
-        out, n_pairs, n_cand = composite_cpp(m2d_v, proj.conics, opac_v, proj.depths, col_v, order, proj.extents.to(dtype), width,
-                                             height, t_min)
-        return _outputs(out, background, proj, n_pairs, n_cand, width, height)
-    with torch.no_grad():
         rank = torch.empty_like(order)
         rank[order] = torch.arange(M)
         u0 = m2d_v[:, 0].detach()
