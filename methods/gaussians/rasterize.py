@@ -128,14 +128,14 @@ def project_gaussians(means: torch.Tensor, quats: torch.Tensor, scales: torch.Te
     if kernel == "cpp" and dtype == torch.float32 and raster_kernel_available():
         cam = torch.cat([R.reshape(9), t, torch.stack([fx, fy, cx, cy]),
                          torch.tensor([lim_xn, lim_xp, lim_yn, lim_yp, eps2d, max_scale], dtype=f64)])
-        means2d_vis, conics, z, ext = project_cpp(means[ids], quats[ids], scales[ids], cam)
+        means2d_vis, conics, z, ext = project_cpp(_rows(means, ids), _rows(quats, ids), _rows(scales, ids), cam)
     else:
-        m = means[ids].to(f64)
+        m = _rows(means, ids).to(f64)
         pc = m @ R.T + t  # [M, 3]
         x, y, z = pc.unbind(-1)
         # 3D covariance in the camera frame
-        rot = quat_to_rotmat(quats[ids].to(f64))  # [M, 3, 3]
-        s = scales[ids].to(f64).clamp(0.0, max_scale)
+        rot = quat_to_rotmat(_rows(quats, ids).to(f64))  # [M, 3, 3]
+        s = _rows(scales, ids).to(f64).clamp(0.0, max_scale)
         M_ = R @ rot * s[:, None, :]  # [M, 3, 3] = R_cw R(q) S
         cov_cam = M_ @ M_.transpose(1, 2)
         # perspective Jacobian with the clamped view-ray slope
@@ -154,10 +154,20 @@ def project_gaussians(means: torch.Tensor, quats: torch.Tensor, scales: torch.Te
         means2d_vis = torch.stack([u, v], -1)
         ext = 3.0 * torch.stack([a, c], -1).sqrt()
     N = means.shape[0]
-    means2d = torch.zeros(N, 2, dtype=dtype, device=means.device).index_copy(0, ids, means2d_vis.to(dtype))
-    radii = torch.zeros(N, dtype=dtype, device=means.device)
-    radii[ids] = ext.detach().max(-1).values.to(dtype)
+    if ids.numel() == N:  # every Gaussian visible (the usual case): no scatter
+        means2d = means2d_vis.to(dtype)
+        radii = ext.detach().max(-1).values.to(dtype)
+    else:
+        means2d = torch.zeros(N, 2, dtype=dtype, device=means.device).index_copy(0, ids, means2d_vis.to(dtype))
+        radii = torch.zeros(N, dtype=dtype, device=means.device)
+        radii[ids] = ext.detach().max(-1).values.to(dtype)
     return Projection(ids=ids, means2d=means2d, conics=conics.to(dtype), depths=z.to(dtype), extents=ext.detach(), radii=radii)
+
+
+def _rows(x: torch.Tensor, ids: torch.Tensor) -> torch.Tensor:
+    """``x[ids]``, or ``x`` itself when ``ids`` is every row in order (all Gaussians visible: no gather and no
+    scatter in the backward)."""
+    return x if ids.numel() == x.shape[0] else x[ids]
 
 
 def _candidate_pairs(u0: torch.Tensor, v0: torch.Tensor, ext: torch.Tensor, width: int, row_lo: int, row_hi: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -243,9 +253,9 @@ def rasterize_gaussians(means: torch.Tensor, quats: torch.Tensor, scales: torch.
     proj = project_gaussians(means, quats, scales, viewmat, K, width, height, near=near, eps2d=eps2d, max_scale=max_scale, kernel=kernel)
     ids = proj.ids
     M = ids.numel()
-    opac_v = opacities[ids]
-    col_v = colors[ids]
-    m2d_v = proj.means2d[ids]
+    opac_v = _rows(opacities, ids)
+    col_v = _rows(colors, ids)
+    m2d_v = _rows(proj.means2d, ids)
     if kernel == "cpp" and dtype == torch.float32 and raster_kernel_available():
         out, n_pairs, n_cand = composite_cpp(m2d_v, proj.conics, opac_v, proj.depths, col_v, proj.extents.to(dtype), width, height, t_min)
         return _outputs(out, background, proj, n_pairs, n_cand, width, height)

@@ -89,6 +89,14 @@ def test_cpp_kernel_boxes_partly_and_wholly_off_the_image():
     _assert_twins(params, vm, K, W, H)
 
 
+def test_cpp_kernel_with_gaussians_behind_the_camera():
+    """Some Gaussians culled (z <= near): the visible subset is gathered and the gradients scattered back."""
+    params, vm, K, W, H = _scene(300, 9, 20, 16)
+    params[0][::7, 2] = -1.0
+    a, b = _assert_twins(params, vm, K, W, H)
+    assert 0 < b["proj"].ids.numel() < 300
+
+
 def test_cpp_kernel_thousands_of_gaussians_on_one_pixel():
     """5000 Gaussians of opacity 0.01 stacked on the centre pixel: the cut-off after k = 916 pairs."""
     n, W, H = 5000, 5, 5
