@@ -2,10 +2,12 @@
 // per pixel, forward and backward. The PyTorch path of rasterize.py is the twin the tests compare it with.
 //
 // Forward: every visible Gaussian covers the pixel centres inside its 3-sigma box (integer bounds computed
-// with the same float32 operations as the PyTorch path). A counting pass gives every pixel a slot range for
-// its candidates; the Gaussians, visited in depth order (a stable sort: ties by index, as the twin), write their pairs
-// into those ranges, so each pixel's list is front to back without a sort and no pixel tests a Gaussian
-// that does not cover it (a tiled walk measured 3x slower: its box tests mispredict). Per pair
+// with the same float32 operations as the PyTorch path). Row bands of at most max_pairs candidates are done
+// one after the other (as the twin's bands: bounded memory). In a band, a counting pass gives every pixel a
+// slot range for its candidates; the Gaussians, visited in depth order (a stable sort: ties by index, as the
+// twin), write their pairs into those ranges, so each pixel's list is front to back without a sort and no
+// pixel tests a Gaussian that does not cover it (a tiled walk measured 3x slower: its box tests
+// mispredict). Per pair
 // alpha = min(0.99, o exp(min(power, 0))) with
 // power = -0.5 (A dx dx + C dy dy) - B dx dy (float32, in the twin's operation order; compiled without
 // -ffast-math and with -ffp-contract=off so nothing is fused or reordered), drops alpha < 1/255, and
@@ -13,8 +15,8 @@
 // sums float32 log1p(-alpha) in float64 and exponentiates: the same to float32 rounding, two transcendental
 // calls per pair fewer). A pixel stops at the first pair with T (1 - alpha) < t_min (3DGS's cut-off,
 // the twin's prefix rule). Output rows per pixel: [sum w, sum w z, sum w c_0 .. c_{C-1}], w = alpha T.
-// Every slot keeps (Gaussian, o exp(power) before the 0.99 clamp, T as float32) for the backward, pixel by
-// pixel front to back.
+// Only the contributing pairs are kept for the backward, pixel by pixel front to back: (Gaussian, o exp(power)
+// before the 0.99 clamp, T as float32).
 //
 // Backward (one pass per pixel, back to front): with G_i = g . [1, z_i, c_i] the output gradient seen by
 // pair i and S_i = sum_{k > i} w_k G_k, dL/dalpha_i = T_i G_i - S_i / (1 - alpha_i) (every later T_k holds
@@ -28,6 +30,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 namespace {
@@ -57,6 +60,12 @@ inline float pair_power(float A, float B, float C, float dx, float dy) {
   return -0.5f * quad - B * dx * dy;
 }
 
+void check_float_rows(const torch::Tensor& t, int64_t rows, int64_t cols, const char* name) {
+  TORCH_CHECK(t.device().is_cpu() && t.dtype() == torch::kFloat32 && t.is_contiguous(), name, ": contiguous float32 CPU tensor");
+  TORCH_CHECK(cols == 0 ? (t.dim() == 1 && t.size(0) == rows) : (t.dim() == 2 && t.size(0) == rows && t.size(1) == cols), name,
+              ": expected shape (", rows, cols == 0 ? "" : ", ", cols == 0 ? "" : std::to_string(cols), ")");
+}
+
 }  // namespace
 
 // Returns (out (HW, 2 + C) float32, slot_gaussian (S,) int32, slot_alpha_raw (S,) float32, slot_T (S,) float32,
@@ -64,11 +73,20 @@ inline float pair_power(float A, float B, float C, float dx, float dy) {
 // pixel_count (HW,) int32, stats (2,) int64 = [contributing pairs, candidate pairs]): pixel p's contributing
 // pairs, front to back, are the slots pixel_start[p] .. pixel_start[p] + pixel_count[p] - 1.
 std::vector<torch::Tensor> raster_forward(torch::Tensor means2d, torch::Tensor conics, torch::Tensor opacities, torch::Tensor depths,
-                                          torch::Tensor colors, torch::Tensor extents, int64_t width,
-                                          int64_t height, double t_min) {
-  TORCH_CHECK(means2d.dtype() == torch::kFloat32 && means2d.is_contiguous(), "means2d: contiguous float32 (M, 2)");
+                                          torch::Tensor colors, torch::Tensor extents, int64_t width, int64_t height, double t_min,
+                                          int64_t max_pairs) {
   const int64_t M = means2d.size(0);
+  TORCH_CHECK(colors.dim() == 2 && colors.size(0) == M && colors.size(1) >= 1, "colors: (M, C) with C >= 1");
   const int64_t C = colors.size(1);
+  check_float_rows(means2d, M, 2, "means2d");
+  check_float_rows(conics, M, 3, "conics");
+  check_float_rows(opacities, M, 0, "opacities");
+  check_float_rows(depths, M, 0, "depths");
+  check_float_rows(colors, M, C, "colors");
+  check_float_rows(extents, M, 2, "extents");
+  TORCH_CHECK(M < (int64_t(1) << 31), "more than 2^31 Gaussians");
+  TORCH_CHECK(width >= 1 && height >= 1 && width < (1 << 24) && height < (1 << 24), "image size out of range");
+  TORCH_CHECK(t_min > 0.0 && max_pairs >= 1, "t_min and max_pairs must be positive");
   const int W = static_cast<int>(width), H = static_cast<int>(height);
   const int64_t HW = static_cast<int64_t>(W) * H;
   const float* m2 = means2d.data_ptr<float>();
@@ -78,84 +96,106 @@ std::vector<torch::Tensor> raster_forward(torch::Tensor means2d, torch::Tensor c
   const float* col = colors.data_ptr<float>();
   const float* ext = extents.data_ptr<float>();
 
-  // the Gaussians by increasing depth, ties by index (the twin's stable torch.sort)
+  // the Gaussians by increasing depth, ties by index (the twin's stable torch.sort; depths are finite here)
   std::vector<int64_t> ord(M);
   for (int64_t g = 0; g < M; ++g) ord[g] = g;
   std::stable_sort(ord.begin(), ord.end(), [z](int64_t i, int64_t j) { return z[i] < z[j]; });
   std::vector<Box> box(M);
-  for (int64_t g = 0; g < M; ++g) box[g] = pixel_box(m2[2 * g], m2[2 * g + 1], ext[2 * g], ext[2 * g + 1], W, H);
-  // 1. candidates per pixel (pixel centres inside a box), as offsets of each pixel's slot range
-  auto pix_start = torch::zeros({HW}, torch::kInt64);
-  int64_t* ps = pix_start.data_ptr<int64_t>();
-  std::vector<int32_t> n_slot(HW, 0);
+  std::vector<int64_t> row_cand(H + 1, 0);  // candidates per image row
   for (int64_t g = 0; g < M; ++g) {
-    const Box& b = box[g];
-    for (int y = b.y0; y <= b.y1; ++y) {
-      int32_t* r = n_slot.data() + static_cast<int64_t>(y) * W;
-      for (int x = b.x0; x <= b.x1; ++x) ++r[x];
-    }
+    box[g] = pixel_box(m2[2 * g], m2[2 * g + 1], ext[2 * g], ext[2 * g + 1], W, H);
+    for (int y = box[g].y0; y <= box[g].y1; ++y) row_cand[y] += box[g].x1 - box[g].x0 + 1;
   }
-  int64_t n_cand = 0;
-  for (int64_t p = 0; p < HW; ++p) {
-    ps[p] = n_cand;
-    n_cand += n_slot[p];
-  }
-  // 2. each pixel's list in depth order (Gaussians visited by the caller's stable depth sort): the Gaussian
-  // and its alpha, for the pairs with alpha >= 1/255
-  auto buf_g = torch::empty({n_cand}, torch::kInt32);
-  auto buf_a = torch::empty({n_cand}, torch::kFloat32);  // o exp(power) before the clamp at 0.99
-  auto buf_T = torch::empty({n_cand}, torch::kFloat32);  // T in front of the pair (contributing pairs only)
-  int32_t* bg = buf_g.data_ptr<int32_t>();
-  float* ba = buf_a.data_ptr<float>();
-  float* bT = buf_T.data_ptr<float>();
-  std::fill(n_slot.begin(), n_slot.end(), 0);
-  for (int64_t k = 0; k < M; ++k) {
-    const int64_t g = ord[k];
-    const Box& b = box[g];
-    const float u0 = m2[2 * g], v0 = m2[2 * g + 1], A = con[3 * g], B = con[3 * g + 1], Cc = con[3 * g + 2], o_g = op[g];
-    for (int y = b.y0; y <= b.y1; ++y) {
-      const float dy = static_cast<float>(y) - v0;
-      for (int x = b.x0; x <= b.x1; ++x) {
-        const float dx = static_cast<float>(x) - u0;
-        const float a_raw = o_g * std::exp(std::min(pair_power(A, B, Cc, dx, dy), 0.f));
-        if (!(std::min(a_raw, ALPHA_MAX) >= ALPHA_MIN)) continue;
-        const int64_t pix = static_cast<int64_t>(y) * W + x;
-        const int64_t slot = ps[pix] + n_slot[pix]++;
-        bg[slot] = static_cast<int32_t>(g);
-        ba[slot] = a_raw;
-      }
-    }
-  }
-  // 3. front-to-back compositing; a kept pair's T (float32) is stored for the backward
   auto out = torch::zeros({HW, 2 + C}, torch::kFloat32);
+  auto pix_start = torch::zeros({HW}, torch::kInt64);
   auto pix_count = torch::zeros({HW}, torch::kInt32);
   float* o = out.data_ptr<float>();
+  int64_t* ps = pix_start.data_ptr<int64_t>();
   int32_t* pc = pix_count.data_ptr<int32_t>();
-  int64_t n_pairs = 0;
-  for (int64_t pix = 0; pix < HW; ++pix) {
-    float* row = o + pix * (2 + C);
-    double T = 1.0;  // transmittance in front of the next pair
-    int32_t count = 0;
-    for (int32_t j = 0; j < n_slot[pix]; ++j) {
-      const int64_t slot = ps[pix] + j;
-      const int32_t g = bg[slot];
-      const float alpha = std::min(ba[slot], ALPHA_MAX);
-      const double after = T * (1.0 - static_cast<double>(alpha));
-      if (!(after >= t_min)) break;  // T only falls further: every later pair of this pixel is cut off too
-      const float Tf = static_cast<float>(T);
-      const float w = alpha * Tf;
-      row[0] += w;
-      row[1] += w * z[g];
-      for (int64_t c = 0; c < C; ++c) row[2 + c] += w * col[g * C + c];
-      bT[slot] = Tf;
-      ++count;
-      T = after;
+  std::vector<int32_t> keep_g;  // the contributing pairs, pixel by pixel front to back
+  std::vector<float> keep_a, keep_T;
+  std::vector<int32_t> n_slot;
+  std::vector<int64_t> band_start;
+  std::vector<int32_t> bg;
+  std::vector<float> ba;
+  int64_t n_cand = 0;
+  // row bands of at most max_pairs candidates (at least one row): the candidate buffers stay bounded
+  for (int y_lo = 0; y_lo < H;) {
+    int y_hi = y_lo + 1;
+    int64_t band_cand = row_cand[y_lo];
+    while (y_hi < H && band_cand + row_cand[y_hi] <= max_pairs) band_cand += row_cand[y_hi++];
+    n_cand += band_cand;
+    const int64_t p_lo = static_cast<int64_t>(y_lo) * W, n_pix = static_cast<int64_t>(y_hi - y_lo) * W;
+    // 1. candidates per pixel of the band (pixel centres inside a box), as offsets of each pixel's slot range
+    n_slot.assign(n_pix, 0);
+    for (int64_t g = 0; g < M; ++g) {
+      const Box& b = box[g];
+      for (int y = std::max(b.y0, y_lo); y <= std::min(b.y1, y_hi - 1); ++y) {
+        int32_t* r = n_slot.data() + static_cast<int64_t>(y - y_lo) * W;
+        for (int x = b.x0; x <= b.x1; ++x) ++r[x];
+      }
     }
-    pc[pix] = count;
-    n_pairs += count;
+    band_start.assign(n_pix, 0);
+    for (int64_t p = 1; p < n_pix; ++p) band_start[p] = band_start[p - 1] + n_slot[p - 1];
+    // 2. each pixel's list in depth order: the Gaussian and o exp(power) (before the 0.99 clamp), for the
+    // pairs with alpha >= 1/255
+    bg.resize(band_cand);
+    ba.resize(band_cand);
+    std::fill(n_slot.begin(), n_slot.end(), 0);
+    for (int64_t k = 0; k < M; ++k) {
+      const int64_t g = ord[k];
+      const Box& b = box[g];
+      const float u0 = m2[2 * g], v0 = m2[2 * g + 1], A = con[3 * g], B = con[3 * g + 1], Cc = con[3 * g + 2], o_g = op[g];
+      for (int y = std::max(b.y0, y_lo); y <= std::min(b.y1, y_hi - 1); ++y) {
+        const float dy = static_cast<float>(y) - v0;
+        for (int x = b.x0; x <= b.x1; ++x) {
+          const float dx = static_cast<float>(x) - u0;
+          const float a_raw = o_g * std::exp(std::min(pair_power(A, B, Cc, dx, dy), 0.f));
+          if (!(std::min(a_raw, ALPHA_MAX) >= ALPHA_MIN)) continue;
+          const int64_t p = static_cast<int64_t>(y - y_lo) * W + x;
+          const int64_t slot = band_start[p] + n_slot[p]++;
+          bg[slot] = static_cast<int32_t>(g);
+          ba[slot] = a_raw;
+        }
+      }
+    }
+    // 3. front-to-back compositing; the contributing pairs (and T as float32) are kept for the backward
+    for (int64_t p = 0; p < n_pix; ++p) {
+      const int64_t pix = p_lo + p;
+      float* row = o + pix * (2 + C);
+      ps[pix] = static_cast<int64_t>(keep_g.size());
+      double T = 1.0;  // transmittance in front of the next pair
+      int32_t count = 0;
+      for (int32_t j = 0; j < n_slot[p]; ++j) {
+        const int64_t slot = band_start[p] + j;
+        const int32_t g = bg[slot];
+        const float alpha = std::min(ba[slot], ALPHA_MAX);
+        const double after = T * (1.0 - static_cast<double>(alpha));
+        if (!(after >= t_min)) break;  // T only falls further: every later pair of this pixel is cut off too
+        const float Tf = static_cast<float>(T);
+        const float w = alpha * Tf;
+        row[0] += w;
+        row[1] += w * z[g];
+        for (int64_t c = 0; c < C; ++c) row[2 + c] += w * col[g * C + c];
+        keep_g.push_back(g);
+        keep_a.push_back(ba[slot]);
+        keep_T.push_back(Tf);
+        ++count;
+        T = after;
+      }
+      pc[pix] = count;
+    }
+    y_lo = y_hi;
   }
-  auto stats = torch::tensor({n_pairs, n_cand}, torch::kInt64);
-  return {out, buf_g, buf_a, buf_T, pix_start, pix_count, stats};
+  const int64_t P = static_cast<int64_t>(keep_g.size());
+  auto slot_g = torch::empty({P}, torch::kInt32);
+  auto slot_a = torch::empty({P}, torch::kFloat32);
+  auto slot_T = torch::empty({P}, torch::kFloat32);
+  std::copy(keep_g.begin(), keep_g.end(), slot_g.data_ptr<int32_t>());
+  std::copy(keep_a.begin(), keep_a.end(), slot_a.data_ptr<float>());
+  std::copy(keep_T.begin(), keep_T.end(), slot_T.data_ptr<float>());
+  auto stats = torch::tensor({P, n_cand}, torch::kInt64);
+  return {out, slot_g, slot_a, slot_T, pix_start, pix_count, stats};
 }
 
 // Returns the gradients of (means2d (M, 2), conics (M, 3), opacities (M,), depths (M,), colors (M, C)).
@@ -313,7 +353,17 @@ inline void project_one(const float* m, const float* qr, const float* sc, const 
 }  // namespace
 
 // Returns (means2d (M, 2), conics (M, 3), depths (M,), extents (M, 2) float64) of the M visible Gaussians.
+void check_projection_inputs(const torch::Tensor& means, const torch::Tensor& quats, const torch::Tensor& scales, const torch::Tensor& cam) {
+  const int64_t M = means.size(0);
+  check_float_rows(means, M, 3, "means");
+  check_float_rows(quats, M, 4, "quats");
+  check_float_rows(scales, M, 3, "scales");
+  TORCH_CHECK(cam.device().is_cpu() && cam.dtype() == torch::kFloat64 && cam.is_contiguous() && cam.numel() == 22,
+              "cam: 22 contiguous float64 values");
+}
+
 std::vector<torch::Tensor> project_forward(torch::Tensor means, torch::Tensor quats, torch::Tensor scales, torch::Tensor cam) {
+  check_projection_inputs(means, quats, scales, cam);
   const int64_t M = means.size(0);
   const float* m = means.data_ptr<float>();
   const float* q = quats.data_ptr<float>();
@@ -346,7 +396,11 @@ std::vector<torch::Tensor> project_forward(torch::Tensor means, torch::Tensor qu
 // Gradients of (means (M, 3), quats (M, 4), scales (M, 3)) from those of (means2d, conics, depths).
 std::vector<torch::Tensor> project_backward(torch::Tensor g_m2d, torch::Tensor g_con, torch::Tensor g_dep, torch::Tensor means,
                                             torch::Tensor quats, torch::Tensor scales, torch::Tensor cam) {
+  check_projection_inputs(means, quats, scales, cam);
   const int64_t M = means.size(0);
+  check_float_rows(g_m2d, M, 2, "grad means2d");
+  check_float_rows(g_con, M, 3, "grad conics");
+  check_float_rows(g_dep, M, 0, "grad depths");
   const float* m = means.data_ptr<float>();
   const float* q = quats.data_ptr<float>();
   const float* s = scales.data_ptr<float>();
@@ -388,7 +442,7 @@ std::vector<torch::Tensor> project_backward(torch::Tensor g_m2d, torch::Tensor g
       for (int j = 0; j < 3; ++j) GJ0[3 * i + j] = G2s[2 * i] * J[j] + G2s[2 * i + 1] * J[3 + j];
     for (int i = 0; i < 2; ++i)
       for (int j = 0; j < 3; ++j) GJ[3 * i + j] = GJ0[3 * i] * P.cov[j] + GJ0[3 * i + 1] * P.cov[3 + j] + GJ0[3 * i + 2] * P.cov[6 + j];
-    // gradient of cov: J^T G2 J (symmetrised the same way: a symmetric cov gets (G + G^T) / 2 per side)
+    // gradient of cov: J^T G2 J (not symmetric; the product cov = Mx Mx^T below takes both G and G^T)
     double Gcov[9];
     for (int i = 0; i < 3; ++i)
       for (int j = 0; j < 3; ++j)

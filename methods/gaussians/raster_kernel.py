@@ -1,9 +1,11 @@
 """The rasteriser's screen-space part (steps 2-6 of :mod:`methods.gaussians.rasterize`) as a C++ kernel.
 
-``_raster_kernel.cpp`` composites every pixel front to back over its tile's depth-sorted Gaussians and
-writes a hand-derived backward; it computes what the PyTorch path of ``rasterize.py`` computes (the same
-float32 operations in the same order, the same pair selection), which stays as its tested twin and as the
-fallback without a compiler. Compiled on first use without ``-ffast-math`` and with ``-ffp-contract=off``:
+``_raster_kernel.cpp`` composites every pixel front to back over the depth-sorted Gaussians whose 3-sigma box
+holds it, and has hand-derived backwards (also for the EWA projection); it computes what the PyTorch path of ``rasterize.py`` computes (the same
+float32 operations in the same order, the same pair selection up to an ulp of ``exp``: glibc's here, SLEEF's
+in PyTorch), which stays as its tested twin and as the fallback without a compiler. Gradients reach the
+Gaussians only (not the camera: ``rasterize_gaussians`` takes the PyTorch path for a camera that needs them);
+no double backward. Compiled on first use without ``-ffast-math`` and with ``-ffp-contract=off``:
 no fused or reordered arithmetic. The kernel keeps the transmittance as a float64 running product where the
 twin exponentiates a float64 sum of float32 ``log1p(-alpha)``: the two agree to float32 rounding (tests).
 """
@@ -11,6 +13,7 @@ twin exponentiates a float64 sum of float32 ``log1p(-alpha)``: the two agree to 
 from __future__ import annotations
 
 import torch
+from torch.autograd.function import once_differentiable
 
 from methods.cpp_build import CppExtension
 
@@ -28,39 +31,41 @@ class _RasterFunction(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor, depths: torch.Tensor,  # type: ignore[override]
-                colors: torch.Tensor, extents: torch.Tensor, width: int, height: int, t_min: float):
+                colors: torch.Tensor, extents: torch.Tensor, width: int, height: int, t_min: float, max_pairs: int):
         ext = _KERNEL.load()
         assert ext is not None  # callers check raster_kernel_available()
         args = [t.detach().contiguous() for t in (means2d, conics, opacities, depths, colors)]
         out, slot_g, slot_a, slot_T, pix_start, pix_count, stats = ext.raster_forward(*args, extents.contiguous(),
-                                                                                      width, height, t_min)
+                                                                                      width, height, t_min, max_pairs)
         ctx.save_for_backward(*args, slot_g, slot_a, slot_T, pix_start, pix_count)
         ctx.width = width
         ctx.mark_non_differentiable(stats)
         return out, stats
 
     @staticmethod
+    @once_differentiable
     def backward(ctx, grad_out: torch.Tensor, _grad_stats: torch.Tensor):  # type: ignore[override]
         ext = _KERNEL.load()
         assert ext is not None
         grads = ext.raster_backward(grad_out.contiguous(), *ctx.saved_tensors, ctx.width)
-        return (*grads, None, None, None, None)
+        return (*grads, None, None, None, None, None)
 
 
 def composite_cpp(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor, depths: torch.Tensor, colors: torch.Tensor,
-                  extents: torch.Tensor, width: int, height: int, t_min: float) -> tuple[torch.Tensor, int, int]:
+                  extents: torch.Tensor, width: int, height: int, t_min: float, max_pairs: int) -> tuple[torch.Tensor, int, int]:
     """Composite M projected Gaussians into a ``width`` x ``height`` image (float32, differentiable).
 
     Args:
         means2d: (M, 2) pixel centres (u, v). conics: (M, 3) ``(A, B, C)`` of the inverse 2D covariance.
         opacities: (M,) in [0, 1]. depths: (M,) camera z (metres; composited front to back, ties by index). colors: (M, C).
-        extents: (M, 2) half-widths of the 3-sigma boxes in pixels. t_min: transmittance cut-off.
+        extents: (M, 2) half-widths of the 3-sigma boxes in pixels. t_min: transmittance cut-off (> 0).
+        max_pairs: candidate pairs per row band (the bands run one after another: bounded memory; one row at least).
 
     Returns:
         (HW, 2 + C) rows ``[sum w, sum w z, sum w c]`` per pixel (row-major pixels), the number of
         contributing pairs and the number of candidate pairs (pixel centres inside the boxes).
     """
-    out, stats = _RasterFunction.apply(means2d, conics, opacities, depths, colors, extents, width, height, t_min)
+    out, stats = _RasterFunction.apply(means2d, conics, opacities, depths, colors, extents, width, height, t_min, max_pairs)
     return out, int(stats[0]), int(stats[1])
 
 
@@ -78,6 +83,7 @@ class _ProjectFunction(torch.autograd.Function):
         return m2d, conics, depths, extents
 
     @staticmethod
+    @once_differentiable
     def backward(ctx, g_m2d: torch.Tensor, g_conics: torch.Tensor, g_depths: torch.Tensor, _g_ext: torch.Tensor):  # type: ignore[override]
         ext = _KERNEL.load()
         assert ext is not None

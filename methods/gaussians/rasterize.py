@@ -107,7 +107,7 @@ def project_gaussians(means: torch.Tensor, quats: torch.Tensor, scales: torch.Te
         eps2d: dilation of the 2D covariance in px^2. max_scale: upper clamp of the scales (metres).
         kernel: ``"torch"`` (the PyTorch ops below) or ``"cpp"`` (the same float64 arithmetic per Gaussian in
             C++ with a hand-derived backward, :func:`methods.gaussians.raster_kernel.project_cpp`; float32
-            inputs only, else the PyTorch ops).
+            inputs and a camera without gradients only, else the PyTorch ops).
     """
     dtype = means.dtype
     f64 = torch.float64
@@ -125,7 +125,7 @@ def project_gaussians(means: torch.Tensor, quats: torch.Tensor, scales: torch.Te
     lim_xn = (cx / fx + 0.3 * width / fx).item()
     lim_yp = ((height - 1 - cy) / fy + 0.3 * height / fy).item()
     lim_yn = (cy / fy + 0.3 * height / fy).item()
-    if kernel == "cpp" and dtype == torch.float32 and raster_kernel_available():
+    if _use_cpp(kernel, (means, quats, scales), viewmat, K):
         cam = torch.cat([R.reshape(9), t, torch.stack([fx, fy, cx, cy]),
                          torch.tensor([lim_xn, lim_xp, lim_yn, lim_yp, eps2d, max_scale], dtype=f64)])
         means2d_vis, conics, z, ext = project_cpp(_rows(means, ids), _rows(quats, ids), _rows(scales, ids), cam)
@@ -162,6 +162,12 @@ def project_gaussians(means: torch.Tensor, quats: torch.Tensor, scales: torch.Te
         radii = torch.zeros(N, dtype=dtype, device=means.device)
         radii[ids] = ext.detach().max(-1).values.to(dtype)
     return Projection(ids=ids, means2d=means2d, conics=conics.to(dtype), depths=z.to(dtype), extents=ext.detach(), radii=radii)
+
+
+def _use_cpp(kernel: str, tensors: tuple[torch.Tensor, ...], viewmat: torch.Tensor, K: torch.Tensor) -> bool:
+    """The C++ path runs when asked for, on float32 CPU Gaussians, for a camera without gradients, if it compiled."""
+    return (kernel == "cpp" and all(t.dtype == torch.float32 and t.device.type == "cpu" for t in tensors)
+            and not (viewmat.requires_grad or K.requires_grad) and raster_kernel_available())
 
 
 def _rows(x: torch.Tensor, ids: torch.Tensor) -> torch.Tensor:
@@ -228,9 +234,9 @@ def rasterize_gaussians(means: torch.Tensor, quats: torch.Tensor, scales: torch.
         width, height: image size (pixels).
         background: (C,) colour behind everything (default 0).
         near: near plane (metres). eps2d: 2D dilation (px^2). t_min: transmittance cut-off.
-        max_pairs: bound on the candidate pairs generated at once (row bands are processed separately; PyTorch path only).
+        max_pairs: bound on the candidate pairs generated at once (row bands are processed separately; both paths).
         kernel: ``"cpp"`` (default): steps 2-6 in one C++ pass per pixel (:mod:`methods.gaussians.raster_kernel`,
-            float32 only, falls back to the PyTorch path without a compiler); ``"torch"``: the PyTorch path below,
+            float32, camera without gradients; else, and without a compiler, the PyTorch path); ``"torch"``: the PyTorch path below,
             the kernel's twin.
 
     Returns:
@@ -239,6 +245,8 @@ def rasterize_gaussians(means: torch.Tensor, quats: torch.Tensor, scales: torch.
     """
     if kernel not in ("cpp", "torch"):
         raise ValueError(f"kernel must be 'cpp' or 'torch', got {kernel!r}")
+    if not t_min > 0:
+        raise ValueError(f"t_min must be > 0, got {t_min}")
     if means.ndim != 2 or means.shape[1] != 3:
         raise ValueError(f"means must be (N, 3), got {tuple(means.shape)}")
     N = means.shape[0]
@@ -256,8 +264,9 @@ def rasterize_gaussians(means: torch.Tensor, quats: torch.Tensor, scales: torch.
     opac_v = _rows(opacities, ids)
     col_v = _rows(colors, ids)
     m2d_v = _rows(proj.means2d, ids)
-    if kernel == "cpp" and dtype == torch.float32 and raster_kernel_available():
-        out, n_pairs, n_cand = composite_cpp(m2d_v, proj.conics, opac_v, proj.depths, col_v, proj.extents.to(dtype), width, height, t_min)
+    if _use_cpp(kernel, (means, quats, scales, opacities, colors), viewmat, K):
+        out, n_pairs, n_cand = composite_cpp(m2d_v, proj.conics, opac_v, proj.depths, col_v, proj.extents.to(dtype), width, height, t_min,
+                                             max_pairs)
         return _outputs(out, background, proj, n_pairs, n_cand, width, height)
     # depth rank (stable) so the sort key is (pixel, depth, index)
     with torch.no_grad():
