@@ -205,4 +205,7 @@ def _claims_markdown(report: TableReport) -> str:
         note = " (on partial data: some cells miss results)" if cr.partial and not cr.verdict.startswith("UNDECIDED") else ""
         lines.append(f"- **{cr.verdict}**{note} `{c.id}`: {c.text} (paper's own values: {cr.paper_verdict})")
         lines += [f"    - {d}" for d in cr.details]
+    lines += ["", "A claim is HELD when every comparison goes its way by more than the combined seed spread (std + std), "
+              "NOT HELD when one goes against it by more than that; otherwise UNDECIDED, with the verdict on the measured "
+              "means in brackets (`bench/claims.py`)."]
     return "\n".join(lines)
