@@ -173,27 +173,9 @@ def test_better_claim_with_a_margin(tmp_path: Path, results: Path, margin: float
         load_table_spec(p)
 
 
-def test_greater_claim_on_extra_metrics(tmp_path: Path) -> None:
-    obj = json.loads(json.dumps(SPEC))
-    obj["datasets"][0]["extra_metrics"] = ["unc_thin", "unc_plane"]
-    obj["claims"] = [{"id": "g", "text": "thin > plane", "kind": "greater", "group": "scannet", "row": "Full",
-                      "metric_a": "unc_thin", "metric_b": "unc_plane"}]
-    p = tmp_path / "abl.yaml"
-    p.write_text(yaml.safe_dump(obj))
-    spec = load_table_spec(p)
-    write_jobs(tmp_path / "r", [job("Full", s, seed, unc_thin=0.6, unc_plane=0.1) for s in ("s0", "s1") for seed in (0, 1, 2)])
-    rep = build_table_by_label(spec, collect_results(tmp_path / "r"), "small")
-    assert rep.claims[0].verdict == "HELD" and not rep.claims[0].partial
-
-
-@pytest.mark.parametrize("thin,verdict", [
-    ((0.6, 0.6, 0.6), "HELD"),  # beyond the spread
-    ((0.12, 0.2, 0.0), "UNDECIDED (within the seed spread: Full unc_thin vs Full unc_plane [scannet]; as measured: HELD)"),
-    ((0.08, 0.1, 0.0), "UNDECIDED (within the seed spread: Full unc_thin vs Full unc_plane [scannet]; as measured: NOT HELD)"),
-    ((0.0, 0.01, 0.02), "NOT HELD"),  # against the claim beyond the spread
-])
-def test_a_claim_inside_the_seed_spread_is_undecided(tmp_path: Path, thin: tuple[float, ...], verdict: str) -> None:
-    """unc_plane is 0.1 in every run; unc_thin per seed as given (3 seeds x 2 scenes)."""
+def _thin_vs_plane_report(tmp_path: Path, thin: tuple[float, float, float]) -> Any:
+    """A table with one "greater" claim, Full unc_thin > unc_plane; unc_plane = 0.1 in every run, unc_thin per seed
+    as given (3 seeds x 2 scenes)."""
     obj = json.loads(json.dumps(SPEC))
     obj["datasets"][0]["extra_metrics"] = ["unc_thin", "unc_plane"]
     obj["claims"] = [{"id": "g", "text": "thin > plane", "kind": "greater", "group": "scannet", "row": "Full",
@@ -201,8 +183,22 @@ def test_a_claim_inside_the_seed_spread_is_undecided(tmp_path: Path, thin: tuple
     p = tmp_path / "abl.yaml"
     p.write_text(yaml.safe_dump(obj))
     write_jobs(tmp_path / "r", [job("Full", s, seed, unc_thin=thin[seed], unc_plane=0.1) for s in ("s0", "s1") for seed in (0, 1, 2)])
-    rep = build_table_by_label(load_table_spec(p), collect_results(tmp_path / "r"), "small")
-    assert rep.claims[0].verdict == verdict
+    return build_table_by_label(load_table_spec(p), collect_results(tmp_path / "r"), "small")
+
+
+def test_greater_claim_on_extra_metrics(tmp_path: Path) -> None:
+    rep = _thin_vs_plane_report(tmp_path, (0.6, 0.6, 0.6))
+    assert rep.claims[0].verdict == "HELD" and not rep.claims[0].partial
+
+
+@pytest.mark.parametrize("thin,verdict", [
+    ((0.6, 0.61, 0.62), "HELD"),  # beyond the spread
+    ((0.12, 0.2, 0.0), "UNDECIDED (within the seed spread: Full unc_thin vs Full unc_plane [scannet]; as measured: HELD)"),
+    ((0.08, 0.1, 0.0), "UNDECIDED (within the seed spread: Full unc_thin vs Full unc_plane [scannet]; as measured: NOT HELD)"),
+    ((0.0, 0.01, 0.02), "NOT HELD"),  # against the claim beyond the spread
+])
+def test_a_claim_inside_the_seed_spread_is_undecided(tmp_path: Path, thin: tuple[float, float, float], verdict: str) -> None:
+    assert _thin_vs_plane_report(tmp_path, thin).claims[0].verdict == verdict
 
 
 def test_outputs_written_atomically(spec: TableSpec, results: Path, tmp_path: Path) -> None:
