@@ -294,7 +294,6 @@ struct Proj {
   double pc[3];     // camera-frame centre
   double q[4];      // normalised quaternion (w, x, y, z); identity for |q| <= 1e-12
   double qn;        // |q|
-  double rot[9];    // R(q), row-major
   double s[3];      // clamped scales
   double Rr[9];     // R_cw R(q)
   double Mx[9];     // R_cw R(q) S
@@ -322,7 +321,6 @@ inline void project_one(const float* m, const float* qr, const float* sc, const 
   const double r[9] = {1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
                        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
                        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)};
-  std::copy(r, r + 9, P.rot);
   for (int j = 0; j < 3; ++j) P.s[j] = std::min(std::max(static_cast<double>(sc[j]), 0.0), cam[21]);
   for (int i = 0; i < 3; ++i)
     for (int j = 0; j < 3; ++j) {

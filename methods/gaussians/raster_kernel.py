@@ -12,6 +12,8 @@ twin exponentiates a float64 sum of float32 ``log1p(-alpha)``: the two agree to 
 
 from __future__ import annotations
 
+from types import ModuleType
+
 import torch
 from torch.autograd.function import once_differentiable
 
@@ -26,14 +28,20 @@ def raster_kernel_available() -> bool:
     return _KERNEL.load() is not None
 
 
+def _loaded() -> ModuleType:
+    """The loaded extension (callers check :func:`raster_kernel_available` first)."""
+    ext = _KERNEL.load()
+    assert ext is not None
+    return ext
+
+
 class _RasterFunction(torch.autograd.Function):
     """Autograd wrapper: forward and backward of the screen-space pass (see ``_raster_kernel.cpp``)."""
 
     @staticmethod
     def forward(ctx, means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor, depths: torch.Tensor,  # type: ignore[override]
                 colors: torch.Tensor, extents: torch.Tensor, width: int, height: int, t_min: float, max_pairs: int):
-        ext = _KERNEL.load()
-        assert ext is not None  # callers check raster_kernel_available()
+        ext = _loaded()
         args = [t.detach().contiguous() for t in (means2d, conics, opacities, depths, colors)]
         out, slot_g, slot_a, slot_T, pix_start, pix_count, stats = ext.raster_forward(*args, extents.contiguous(),
                                                                                       width, height, t_min, max_pairs)
@@ -45,8 +53,7 @@ class _RasterFunction(torch.autograd.Function):
     @staticmethod
     @once_differentiable
     def backward(ctx, grad_out: torch.Tensor, _grad_stats: torch.Tensor):  # type: ignore[override]
-        ext = _KERNEL.load()
-        assert ext is not None
+        ext = _loaded()
         grads = ext.raster_backward(grad_out.contiguous(), *ctx.saved_tensors, ctx.width)
         return (*grads, None, None, None, None, None)
 
@@ -74,8 +81,7 @@ class _ProjectFunction(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor, cam: torch.Tensor):  # type: ignore[override]
-        ext = _KERNEL.load()
-        assert ext is not None
+        ext = _loaded()
         args = [t.detach().contiguous() for t in (means, quats, scales)]
         m2d, conics, depths, extents = ext.project_forward(*args, cam.contiguous())
         ctx.save_for_backward(*args, cam)
@@ -85,8 +91,7 @@ class _ProjectFunction(torch.autograd.Function):
     @staticmethod
     @once_differentiable
     def backward(ctx, g_m2d: torch.Tensor, g_conics: torch.Tensor, g_depths: torch.Tensor, _g_ext: torch.Tensor):  # type: ignore[override]
-        ext = _KERNEL.load()
-        assert ext is not None
+        ext = _loaded()
         means, quats, scales, cam = ctx.saved_tensors
         grads = ext.project_backward(g_m2d.contiguous(), g_conics.contiguous(), g_depths.contiguous(), means, quats, scales, cam)
         return (*grads, None)
