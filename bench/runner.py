@@ -39,7 +39,8 @@ def job_id_for(plan: JobPlan, config: dict[str, Any], threads: int | None = None
     without it, the *base id* that tables and reports match results by. With ``threads`` the id also
     covers this process's matrix-product code path (:func:`bench.mkl_dispatch.blas_path`, which the
     local executor's workers inherit) when it is not the default one, and a config's ``flush_denormals``
-    when on (session 23; the base id leaves it out through ``id_neutral``), for the same reason."""
+    (session 23) and ``coarse_gradient_pass`` (session 26) when on (the base id leaves them out through
+    ``id_neutral``), for the same reason."""
     from bench.mkl_dispatch import blas_path
 
     key = {
@@ -58,6 +59,8 @@ def job_id_for(plan: JobPlan, config: dict[str, Any], threads: int | None = None
             key["blas"] = blas
         if config.get("flush_denormals"):  # a MonoSDF-family job flushes float32 denormals (left out of the base id)
             key["denormals"] = "flushed"
+        if config.get("coarse_gradient_pass"):  # ... and renders its coarse samples from the sampler's pass (same)
+            key["coarse_pass"] = "with_gradient"
     return hashlib.sha256(json.dumps(key, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 

@@ -35,8 +35,8 @@ from bench.data.datasets import load_dataset
 from methods.monosdf.trainer import MonoSDFTrainer
 from methods.registry import typed_method_config
 
-PHASES = ("step.sampler", "sampler.sdf", "step.render", "render.prune_pass", "render.sdf_with_gradient", "render.color",
-          "step.backward", "step.optimizer")  # the record_function labels of MonoSDFTrainer.step / render_rays / the samplers (sampler.sdf: inside step.sampler)
+PHASES = ("step.sampler", "sampler.sdf", "sampler.sdf_with_gradient", "step.render", "render.prune_pass", "render.sdf_with_gradient",
+          "render.color", "step.backward", "step.optimizer")  # the record_function labels of MonoSDFTrainer.step / render_rays / the samplers (sampler.sdf: inside step.sampler)
 
 
 class PhaseClock:

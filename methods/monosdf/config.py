@@ -94,6 +94,7 @@ class MonoSDFConfig:
     mesh_extent: Annotated[float, Positive] | None
     fast_grid: bool
     flush_denormals: bool
+    coarse_gradient_pass: bool
     threads: Annotated[int, NonNegative]
 
     def samples_per_ray(self) -> int:

@@ -111,6 +111,26 @@ def sample_pdf(bins: torch.Tensor, weights: torch.Tensor, n: int, gen: torch.Gen
     return b0 + frac * (b1 - b0)
 
 
+def _coarse_distances(dirs: torch.Tensor, far: torch.Tensor, near: float, n_coarse: int, gen: torch.Generator | None,
+                      jitter: bool) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The sampler's first half: ``(near_t (R,), far_t (R,), t_coarse (R, n_coarse))``, stratified in [near, far]."""
+    R = dirs.shape[0]
+    near_t = torch.full((R,), float(near))
+    far_t = torch.maximum(far, near_t + 1e-3)
+    return near_t, far_t, _stratified(near_t, far_t, n_coarse, gen, jitter)
+
+
+@torch.no_grad()
+def _fine_distances(sdf_coarse: torch.Tensor, t_coarse: torch.Tensor, near_t: torch.Tensor, far_t: torch.Tensor,
+                    density: LaplaceDensity, n_fine: int, gen: torch.Generator | None, jitter: bool) -> torch.Tensor:
+    """The sampler's second half: (R, n_fine) importance samples (unsorted) from the VolSDF weights of the
+    (R, n_coarse) coarse SDF, with the coarse intervals' midpoints as bin edges."""
+    w_c = composite_weights(sdf_coarse, t_coarse, density)
+    mids = 0.5 * (t_coarse[:, 1:] + t_coarse[:, :-1])
+    bins = torch.cat([near_t[:, None], mids, far_t[:, None]], -1)
+    return sample_pdf(bins, w_c, n_fine, gen, jitter)
+
+
 @overload
 def hierarchical_samples(
     sdf_net: SDFNetwork, density: LaplaceDensity, origins: torch.Tensor, dirs: torch.Tensor, far: torch.Tensor,
@@ -135,21 +155,78 @@ def hierarchical_samples(
     ``with_coarse_sdf``: also the (R, n_coarse + n_fine) SDF the coarse pass computed, NaN at the fine
     samples (``render_rays(prune_weight=...)`` then evaluates only those)."""
     R = dirs.shape[0]
-    near_t = torch.full((R,), float(near))
-    far_t = torch.maximum(far, near_t + 1e-3)
-    t_c = _stratified(near_t, far_t, n_coarse, gen, jitter)
+    near_t, far_t, t_c = _coarse_distances(dirs, far, near, n_coarse, gen, jitter)
     pts = origins[:, None, :] + dirs[:, None, :] * t_c[..., None]
     with record_function("sampler.sdf"):
         sdf_c, _, _ = sdf_net(pts.reshape(-1, 3), with_gradient=False)
-    w_c = composite_weights(sdf_c.reshape(R, n_coarse), t_c, density)
-    mids = 0.5 * (t_c[:, 1:] + t_c[:, :-1])
-    bins = torch.cat([near_t[:, None], mids, far_t[:, None]], -1)
-    t_f = sample_pdf(bins, w_c, n_fine, gen, jitter)
+    t_f = _fine_distances(sdf_c.reshape(R, n_coarse), t_c, near_t, far_t, density, n_fine, gen, jitter)
     t, order = torch.sort(torch.cat([t_c, t_f], -1), -1)
     if not with_coarse_sdf:
         return t
     known = torch.cat([sdf_c.reshape(R, n_coarse), torch.full((R, n_fine), float("nan"))], -1)
     return t, torch.gather(known, 1, order)
+
+
+@dataclass
+class CoarseGradientPass:
+    """The hierarchical sampler's coarse samples evaluated WITH gradients (``coarse_gradient_pass``, config):
+    the fine samples are drawn from their detached SDF, and :func:`render_rays` renders them from these
+    outputs instead of evaluating the coarse samples a second time (one no-gradient SDF pass fewer per step;
+    the same samples, values and gradients as the two-pass sampler up to float rounding).
+
+    Attributes:
+        t: (R, S) sorted distances, S = n_coarse + n_fine (what :func:`hierarchical_samples` returns);
+        order: (R, S) int64, ``t = cat([t_coarse, t_fine], 1).gather(1, order)``;
+        t_coarse: (R, n_coarse) the coarse (stratified) distances; t_fine: (R, n_fine) the fine distances in the
+        order they were drawn;
+        sdf: (R * n_coarse,), geo: (R * n_coarse, G), grad: (R * n_coarse, 3): the SDF network at the coarse
+        samples (ray-major), with their autograd graph.
+    """
+
+    t: torch.Tensor
+    order: torch.Tensor
+    t_coarse: torch.Tensor
+    t_fine: torch.Tensor
+    sdf: torch.Tensor
+    geo: torch.Tensor
+    grad: torch.Tensor
+
+    def block_points(self, origins: torch.Tensor, dirs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The (R * n_coarse, 3) coarse and (R * n_fine, 3) fine sample points (ray-major, drawn order) of rays
+        ``origins`` (R, 3), ``dirs`` (R, 3)."""
+        return tuple((origins[:, None, :] + dirs[:, None, :] * tt[..., None]).reshape(-1, 3)  # type: ignore[return-value]
+                     for tt in (self.t_coarse, self.t_fine))
+
+    def ray_of_block(self) -> torch.Tensor:
+        """(R * S,) the ray of each sample of the block layout ``[coarse (ray-major), fine (ray-major)]``."""
+        R = self.t.shape[0]
+        rays = torch.arange(R)
+        return torch.cat([rays.repeat_interleave(self.t_coarse.shape[1]), rays.repeat_interleave(self.t_fine.shape[1])])
+
+    def sorted_index(self) -> torch.Tensor:
+        """(R * S,) for each sample of the sorted (R, S) layout (flattened), its index in the block layout."""
+        R, S = self.order.shape
+        n_c, n_f = self.t_coarse.shape[1], self.t_fine.shape[1]
+        rows = torch.arange(R)[:, None]
+        return torch.where(self.order < n_c, rows * n_c + self.order, R * n_c + rows * n_f + (self.order - n_c)).reshape(-1)
+
+
+def hierarchical_samples_with_gradient(
+    sdf_net: SDFNetwork, density: LaplaceDensity, origins: torch.Tensor, dirs: torch.Tensor, far: torch.Tensor,
+    near: float, n_coarse: int, n_fine: int, gen: torch.Generator | None, jitter: bool,
+) -> CoarseGradientPass:
+    """:func:`hierarchical_samples` whose coarse SDF pass keeps its gradients (same random draws, same
+    distances): for :func:`render_rays` ``(coarse=...)``. ``origins``: (R, 3); ``dirs``: (R, 3) unit; ``far``: (R,)."""
+    R = dirs.shape[0]
+    near_t, far_t, t_c = _coarse_distances(dirs, far, near, n_coarse, gen, jitter)
+    pts = origins[:, None, :] + dirs[:, None, :] * t_c[..., None]
+    with record_function("sampler.sdf_with_gradient"):
+        sdf_c, geo_c, grad_c = sdf_net(pts.reshape(-1, 3), with_gradient=True)
+    assert grad_c is not None  # asked for (with_gradient=True)
+    t_f = _fine_distances(sdf_c.detach().reshape(R, n_coarse), t_c, near_t, far_t, density, n_fine, gen, jitter)
+    with torch.no_grad():
+        t, order = torch.sort(torch.cat([t_c, t_f], -1), -1)
+    return CoarseGradientPass(t=t, order=order, t_coarse=t_c, t_fine=t_f, sdf=sdf_c, geo=geo_c, grad=grad_c)
 
 
 @torch.no_grad()
@@ -188,6 +265,7 @@ def render_rays(
     image: int | torch.Tensor | None = None,
     prune_weight: float = 0.0,
     coarse_sdf: torch.Tensor | None = None,
+    coarse: CoarseGradientPass | None = None,
 ) -> RenderOutput:
     """Render R rays.
 
@@ -210,9 +288,17 @@ def render_rays(
             ``RenderOutput.grad`` is 0 at pruned samples; ``RenderOutput.kept`` counts the rendered ones.
         coarse_sdf: (R, S) SDF already known at some samples (NaN elsewhere; ``hierarchical_samples(...,
             with_coarse_sdf=True)``): the pruning pass evaluates only the unknown ones.
+        coarse: the coarse samples already evaluated with gradients (:func:`hierarchical_samples_with_gradient`,
+            whose distances are used; ``t`` must be None): only the fine samples and ``extra_points`` are
+            evaluated here, every sample is rendered (no ``prune_weight``). The slow twin is the two-pass
+            sampler (``coarse=None``): the same outputs and gradients up to float rounding.
     """
     R = dirs.shape[0]
     origins = origins.expand(R, 3)
+    if coarse is not None:
+        if t is not None or prune_weight > 0:
+            raise ValueError("render_rays: coarse= brings its own distances and renders every sample (no t=, no prune_weight)")
+        t = coarse.t
     if t is None:
         t = hierarchical_samples(sdf_net, density, origins, dirs, far, near, n_coarse, n_fine, gen, jitter)
     S = t.shape[1]
@@ -231,22 +317,36 @@ def render_rays(
             mask = w_all > prune_weight
             mask[torch.arange(R), w_all.argmax(-1)] = True
             keep = mask.reshape(-1).nonzero().squeeze(1)  # (K,) flat sample indices rendered with gradients
-    pts_g = flat if keep is None else flat[keep]
-    n_g = pts_g.shape[0]
+    if coarse is None:  # the points rendered with gradients: the sorted (R * S) layout, or its kept subset
+        pts_g = flat if keep is None else flat[keep]
+        evaluated = pts_g
+    else:  # the block layout [coarse samples, fine samples] (ray-major each); the coarse ones are evaluated already
+        pts_c, evaluated = coarse.block_points(origins, dirs)
+        pts_g = torch.cat([pts_c, evaluated])
+    n_g = evaluated.shape[0]
     with record_function("render.sdf_with_gradient"):
-        sdf_g, geo, grad_g = sdf_net(pts_g if extra_points is None else torch.cat([pts_g, extra_points]), with_gradient=True)
+        sdf_g, geo, grad_g = sdf_net(evaluated if extra_points is None else torch.cat([evaluated, extra_points]), with_gradient=True)
     assert grad_g is not None
     extra_grad = None if extra_points is None else grad_g[n_g:]
     sdf_g, geo, grad_g = sdf_g[:n_g], geo[:n_g], grad_g[:n_g]  # the rendered samples (views without extra points)
+    if coarse is not None:
+        sdf_g, geo, grad_g = torch.cat([coarse.sdf, sdf_g]), torch.cat([coarse.geo, geo]), torch.cat([coarse.grad, grad_g])
     normals_g = F.normalize(grad_g, dim=-1, eps=1e-8)
-    view = dirs[:, None, :].expand(R, S, 3).reshape(-1, 3)
-    if isinstance(image, torch.Tensor):
-        image = image[:, None].expand(R, S).reshape(-1)
+    if coarse is not None:
+        ray_of = coarse.ray_of_block()
+    else:
+        ray_of = torch.arange(R).repeat_interleave(S)
         if keep is not None:
-            image = image[keep]
+            ray_of = ray_of[keep]
+    view = dirs.index_select(0, ray_of)
+    if isinstance(image, torch.Tensor):
+        image = image.index_select(0, ray_of)
     with record_function("render.color"):
-        rgb_g = color_net(pts_g, view if keep is None else view[keep], normals_g, geo, image)
-    if keep is None:
+        rgb_g = color_net(pts_g, view, normals_g, geo, image)
+    if coarse is not None:  # gather the block layout into the sorted (R * S) one
+        index = coarse.sorted_index()
+        sdf, grad, normals, rgb_s = (v.index_select(0, index) for v in (sdf_g, grad_g, normals_g, rgb_g))
+    elif keep is None:
         sdf, grad, normals, rgb_s = sdf_g, grad_g, normals_g, rgb_g
     else:  # scatter the rendered samples into the full (R * S) layout; pruned ones: no-gradient SDF, 0 elsewhere
         sdf = sdf_all.index_put((keep,), sdf_g)
@@ -265,4 +365,4 @@ def render_rays(
     else:
         n_cam = torch.einsum("rij,rj->ri", world_to_cam, n_world)
     return RenderOutput(rgb=rgb, depth=depth, normal=n_cam, acc=acc, weights=w, grad=grad.reshape(R, S, 3), sdf=sdf, t=t,
-                        extra_grad=extra_grad, kept=n_g, kept_index=keep)
+                        extra_grad=extra_grad, kept=pts_g.shape[0], kept_index=keep)

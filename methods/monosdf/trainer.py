@@ -33,7 +33,7 @@ from methods.monosdf.float_mode import denormals_flushed
 from methods.monosdf.grid import make_grid_spec
 from methods.monosdf.losses import color_loss, eikonal_loss, normal_loss, smoothness_loss, ssi_depth_fit, ssi_depth_fit_code
 from methods.monosdf.rays import build_rays, normalisation
-from methods.monosdf.render import RenderOutput, hierarchical_samples, render_depth, render_rays
+from methods.monosdf.render import CoarseGradientPass, RenderOutput, hierarchical_samples, hierarchical_samples_with_gradient, render_depth, render_rays
 
 PixelSampler = Callable[[int, int, torch.Generator], torch.Tensor]
 
@@ -129,17 +129,19 @@ class MonoSDFTrainer:
 
     # ------------------------------------------------------------------ one step
     def render_pixels(self, view: int | torch.Tensor, pixels: torch.Tensor, jitter: bool = True, extra_points: torch.Tensor | None = None,
-                      t: torch.Tensor | None = None, prune_weight: float = 0.0, coarse_sdf: torch.Tensor | None = None) -> RenderOutput:
+                      t: torch.Tensor | None = None, prune_weight: float = 0.0, coarse_sdf: torch.Tensor | None = None,
+                      coarse: CoarseGradientPass | None = None) -> RenderOutput:
         """Render ``pixels`` (flat indices) of training view slot ``view`` (0..V-1; or an (R,) slot per ray)
         with that image's appearance code; ``extra_points`` (E, 3): also their SDF gradients
-        (``RenderOutput.extra_grad``); ``t``: distances from :meth:`sample_rays` (None = sample here)."""
+        (``RenderOutput.extra_grad``); ``t``: distances from :meth:`sample_rays` (None = sample here, unless
+        ``coarse``: the sampler's coarse pass with gradients, :func:`render_rays`)."""
         r = self.rays
-        if t is None:
+        if t is None and coarse is None:
             t = cast(torch.Tensor, self.sample_rays(r.origins[view].expand(len(pixels), 3), r.dirs[view, pixels], r.far[view, pixels], jitter))
         return render_rays(self.sdf, self.color, self.density, r.origins[view], r.dirs[view, pixels], r.z_factor[view, pixels],
                            r.far[view, pixels], r.world_to_cam_rot[view], self.cfg.near, self.cfg.n_coarse, self.cfg.n_fine,
                            self.gen, jitter, extra_points=extra_points, t=t, image=view, prune_weight=prune_weight,
-                           coarse_sdf=coarse_sdf)
+                           coarse_sdf=coarse_sdf, coarse=coarse)
 
     @torch.no_grad()
     def sample_rays(self, origins: torch.Tensor, dirs: torch.Tensor, far: torch.Tensor, jitter: bool,
@@ -285,10 +287,20 @@ class MonoSDFTrainer:
         origins, dirs = r.origins[slot], r.dirs[slot, pixels]
         # prune only while the last step left enough weightless samples to pay for the no-gradient pass
         prune = self.prune_weight if self._prunable_frac <= PRUNE_WORTH else 0.0
+        # the coarse samples evaluated once, with gradients, and rendered from that pass (coarse_gradient_pass); a pruning
+        # step evaluates them without gradients instead (most are pruned)
+        coarse: CoarseGradientPass | None = None
+        coarse_sdf: torch.Tensor | None = None  # the sampler's SDF, reused by the pruning pass
         with record_function("step.sampler"):  # phase labels: what torch.profiler shows per phase (no cost without a profiler)
-            sampled = self.sample_rays(origins, dirs, r.far[slot, pixels], True, with_coarse_sdf=prune > 0)
-        t, coarse_sdf = (cast("tuple[torch.Tensor, torch.Tensor]", sampled) if prune > 0
-                         else (cast(torch.Tensor, sampled), None))  # coarse_sdf: the sampler's SDF, reused by the pruning pass
+            if cfg.coarse_gradient_pass and cfg.sampler == "hierarchical" and prune == 0:
+                coarse = hierarchical_samples_with_gradient(self.sdf, self.density, origins, dirs, r.far[slot, pixels], cfg.near,
+                                                            cfg.n_coarse, cfg.n_fine, self.gen, True)
+                t = coarse.t
+            elif prune > 0:
+                t, coarse_sdf = cast("tuple[torch.Tensor, torch.Tensor]",
+                                     self.sample_rays(origins, dirs, r.far[slot, pixels], True, with_coarse_sdf=True))
+            else:
+                t = cast(torch.Tensor, self.sample_rays(origins, dirs, r.far[slot, pixels], True))
         # eikonal points (MonoSDF): R uniform points in the bounding cube + one sample of each ray
         # (``eikonal_ray_sample``: "random" = MonoSDF, "max_weight" = the highest-weight sample; the ray
         # sample's gradient comes from the rendering itself); with ``smooth_weight`` > 0 also a neighbour of
@@ -317,8 +329,8 @@ class MonoSDFTrainer:
                 extra.append(surf + (torch.rand(R, 3, generator=self.gen) - 0.5) * jit)
         single = len(views) == 1
         with record_function("step.render"):
-            out = self.render_pixels(views[0] if single else slot, pixels, extra_points=torch.cat(extra), t=t, prune_weight=prune,
-                                     coarse_sdf=coarse_sdf)
+            out = self.render_pixels(views[0] if single else slot, pixels, extra_points=torch.cat(extra),
+                                     t=None if coarse is not None else t, prune_weight=prune, coarse_sdf=coarse_sdf, coarse=coarse)
         terms: dict[str, tuple[float, torch.Tensor]] = {"color": (float(cfg.color_weight), color_loss(out.rgb, self.rgb[slot, pixels]))}
         g_extra = out.extra_grad
         assert g_extra is not None

@@ -448,6 +448,78 @@ def test_pruned_rendering_matches_the_full_rendering(tiny_scene):
         torch.testing.assert_close(a, b, atol=2e-2 * float(b.abs().max()) + 1e-6, rtol=0)
 
 
+def test_coarse_gradient_pass_matches_the_two_pass_rendering(tiny_scene):
+    """``coarse_gradient_pass`` (fast path: the coarse samples evaluated once, with gradients, then rendered from that
+    pass in the sorted layout) against the two-pass sampler (slow twin: a no-gradient coarse pass, then every sample
+    again with gradients): the same distances from the same random draws, and colour, depth, normals, weights, the
+    per-sample and extra points' SDF gradients and every parameter gradient agree to float rounding, with a per-ray
+    image slot (the colour network's per-image bias) and eikonal points riding in the pass."""
+    from methods.monosdf.render import hierarchical_samples, hierarchical_samples_with_gradient, render_rays
+
+    tr = _trainer(tiny_scene)
+    tr.step(0)  # a trained, non-symmetric field (the init is a sphere)
+    with torch.no_grad():
+        tr.density.beta_param.fill_(0.02)
+    r, cfg = tr.rays, tr.cfg
+    pixels = torch.arange(0, 400, 7)
+    slot = torch.tensor([0, 1])[torch.arange(len(pixels)) % 2]  # two images: per-ray slots
+    origins, dirs, far = r.origins[slot], r.dirs[slot, pixels], r.far[slot, pixels]
+    extra = torch.rand(40, 3, generator=torch.Generator().manual_seed(3)) * 1.6 - 0.8
+    params = list(tr.sdf.parameters()) + list(tr.color.parameters()) + list(tr.density.parameters())
+    results = []
+    for fast in (True, False):
+        gen = torch.Generator().manual_seed(11)
+        for p in params:
+            p.grad = None
+        common = (tr.sdf, tr.color, tr.density, origins, dirs, r.z_factor[slot, pixels], far, r.world_to_cam_rot[slot], cfg.near,
+                  cfg.n_coarse, cfg.n_fine)
+        if fast:
+            coarse = hierarchical_samples_with_gradient(tr.sdf, tr.density, origins, dirs, far, cfg.near, cfg.n_coarse, cfg.n_fine, gen, True)
+            out = render_rays(*common, gen, True, extra_points=extra, image=slot, coarse=coarse)
+        else:
+            t = hierarchical_samples(tr.sdf, tr.density, origins, dirs, far, cfg.near, cfg.n_coarse, cfg.n_fine, gen, True)
+            out = render_rays(*common, gen, True, extra_points=extra, t=t, image=slot)
+        assert out.extra_grad is not None
+        loss = (out.rgb.sum() + out.depth.sum() + out.normal.sum() + (out.grad[:, ::3] ** 2).sum()
+                + (out.extra_grad.norm(dim=-1) - 1).square().sum())
+        loss.backward()
+        results.append((out, [p.grad.clone() for p in params]))
+    (fast, g_fast), (slow, g_slow) = results
+    assert fast.kept == slow.kept == len(pixels) * cfg.samples_per_ray() and fast.kept_index is None
+    torch.testing.assert_close(fast.t, slow.t, atol=1e-6, rtol=0)
+    for name in ("rgb", "depth", "normal", "weights", "grad", "sdf", "extra_grad"):
+        torch.testing.assert_close(getattr(fast, name), getattr(slow, name), atol=1e-5, rtol=1e-4, msg=name)
+    for a, b in zip(g_fast, g_slow):
+        assert torch.isfinite(a).all()
+        torch.testing.assert_close(a, b, atol=1e-5 * float(b.abs().max()) + 1e-7, rtol=1e-3)
+    with pytest.raises(ValueError, match="coarse="):
+        gen = torch.Generator().manual_seed(11)
+        coarse = hierarchical_samples_with_gradient(tr.sdf, tr.density, origins, dirs, far, cfg.near, cfg.n_coarse, cfg.n_fine, gen, True)
+        render_rays(*common, gen, True, image=slot, coarse=coarse, prune_weight=1e-4)
+
+
+def test_coarse_gradient_pass_trains_like_the_two_pass_sampler(tiny_scene):
+    """Whole steps: ``coarse_gradient_pass: true`` and ``false`` from the same seed give the same losses and parameters
+    over a few steps (float rounding apart; the random draws are the same), with and without the smoothness term's
+    jittered points and in a pruning step (which keeps the two-pass sampler). Adam moves a grid entry whose gradient is
+    ~0 by up to its learning rate either way on a rounding difference: a few such entries may differ, no more."""
+    for over in ({}, {"smooth_weight": 0.0}, {"prune_weight": 1e-4}):
+        trainers = [_trainer(tiny_scene, coarse_gradient_pass=fast, **over) for fast in (True, False)]
+        if "prune_weight" in over:
+            for tr in trainers:
+                tr._prunable_frac = 0.5  # this step prunes
+        logs = [[tr.step(v) for v in (0, 1, 2)] for tr in trainers]
+        for a, b in zip(*logs):
+            for k in b:
+                assert a[k] == pytest.approx(b[k], rel=1e-3, abs=1e-6), (over, k)
+        for (name, pa), pb in zip(trainers[0].sdf.named_parameters(), trainers[1].sdf.parameters()):
+            if name.startswith("grid."):
+                assert float(((pa - pb).abs() > 1e-5).float().mean()) < 1e-4, (over, name)
+                assert float((pa - pb).abs().max()) <= 3 * trainers[0].optim.param_groups[0]["lr"], (over, name)
+            else:
+                torch.testing.assert_close(pa, pb, atol=1e-4, rtol=1e-3, msg=f"{over} {name}")
+
+
 def test_pruned_training_steps_are_finite(tiny_scene):
     for mode in ("random", "max_weight"):
         tr = _trainer(tiny_scene, prune_weight=1e-4, eikonal_ray_sample=mode)
@@ -739,7 +811,8 @@ def test_eikonal_on_every_ray_sample_like_the_release(tiny_scene, prune):
 
 def test_step_labels_every_phase_the_step_benchmark_times(tiny_scene):
     """benchmarks/bench_monosdf_step.py --phases reads these record_function labels: a renamed or dropped
-    label would silently vanish from its table, so a pruned step must show every one of them."""
+    label would silently vanish from its table, so a pruned step and an unpruned one (``coarse_gradient_pass``: the
+    coarse pass with gradients) must show every one of them between them."""
     import importlib.util
     from pathlib import Path
 
@@ -751,8 +824,10 @@ def test_step_labels_every_phase_the_step_benchmark_times(tiny_scene):
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
     tr = _trainer(tiny_scene, prune_weight=1e-4)
-    tr._prunable_frac = 0.0  # the pruned path (its extra no-gradient pass) from the first step
-    with profile(activities=[ProfilerActivity.CPU]) as prof:
-        tr.step(0)
-    seen = {e.key for e in prof.key_averages()}
+    seen: set[str] = set()
+    for frac in (0.0, 1.0):  # 0: the pruned path (its extra no-gradient pass) from the first step; 1: no pruning
+        tr._prunable_frac = frac
+        with profile(activities=[ProfilerActivity.CPU]) as prof:
+            tr.step(0)
+        seen |= {e.key for e in prof.key_averages()}
     assert set(bench.PHASES) <= seen, set(bench.PHASES) - seen
