@@ -39,18 +39,23 @@ SOFTPLUS_BETA = 100.0
 _INV_SQRT2 = 1.0 / math.sqrt(2.0)
 
 
-def softplus_and_slope_reference(z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """Softplus(beta=100) and its derivative sigmoid(beta z) (plain PyTorch twin of the fused kernel)."""
+def softplus_and_slope_reference(z: torch.Tensor, bias: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    """Softplus(beta=100) and its derivative sigmoid(beta z) of ``z`` (+ ``bias``, broadcast over rows) (plain
+    PyTorch twin of the fused kernel)."""
+    if bias is not None:
+        z = z + bias
     return F.softplus(z, beta=SOFTPLUS_BETA), torch.sigmoid(SOFTPLUS_BETA * z)
 
 
 class _SoftplusSlope(torch.autograd.Function):
-    """Fused C++ softplus + slope with a fused backward (the MLP needs both outputs)."""
+    """Fused C++ softplus + slope of ``z`` (P, C) plus an optional (C,) bias, with a fused backward (the MLP needs
+    both outputs). The bias added in the kernel spares its layer's product the bias pass of ``addmm``."""
 
     @staticmethod
-    def forward(ctx, z: torch.Tensor):  # type: ignore[override]
-        a, s = _load_extension().softplus_slope_forward(z, SOFTPLUS_BETA)
+    def forward(ctx, z: torch.Tensor, bias: torch.Tensor | None):  # type: ignore[override]
+        a, s = _load_extension().softplus_slope_forward(z, torch.zeros(0) if bias is None else bias, SOFTPLUS_BETA)
         ctx.save_for_backward(s)
+        ctx.with_bias = bias is not None
         return a, s
 
     @staticmethod
@@ -59,13 +64,15 @@ class _SoftplusSlope(torch.autograd.Function):
         if grad_a is None:
             grad_a = torch.zeros_like(s)
         gs = grad_s if grad_s is not None else torch.zeros(0)
-        return _load_extension().softplus_slope_backward(grad_a, gs, s, SOFTPLUS_BETA)
+        grad_z = _load_extension().softplus_slope_backward(grad_a, gs, s, SOFTPLUS_BETA)
+        return grad_z, (grad_z.sum(0) if ctx.with_bias and ctx.needs_input_grad[1] else None)
 
 
-def _softplus_and_slope(z: torch.Tensor, fast: bool) -> tuple[torch.Tensor, torch.Tensor]:
+def _softplus_and_slope(z: torch.Tensor, fast: bool, bias: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    """Softplus and slope of ``z`` (+ ``bias``): the C++ kernel when ``fast`` (and built), else the reference."""
     if fast and z.dtype == torch.float32 and fast_available():
-        return _SoftplusSlope.apply(z)
-    return softplus_and_slope_reference(z)
+        return _SoftplusSlope.apply(z, bias)
+    return softplus_and_slope_reference(z, bias)
 
 
 class _PEChain(torch.autograd.Function):
@@ -90,7 +97,7 @@ def linear_blocks(blocks: list[torch.Tensor], weight: torch.Tensor, bias: torch.
     Same parameters, same values up to float summation order; autograd then computes an input gradient
     only for the blocks that need one (the positional encoding, the ray directions and the points do not:
     at 55 inputs that one (P, H) @ (H, 55) product was the slowest matrix product of the step) and never
-    materialises or slices the (P, in) concatenation.
+    materialises or slices the (P, in) concatenation; the partial sums accumulate in place.
 
     Args:
         blocks: (P, d_i) tensors with ``sum(d_i) == weight.shape[1]`` (in the column order of ``weight``).
@@ -101,9 +108,12 @@ def linear_blocks(blocks: list[torch.Tensor], weight: torch.Tensor, bias: torch.
     """
     out = bias
     c = 0
-    for x in blocks:
+    for i, x in enumerate(blocks):
         d = x.shape[-1]
-        out = torch.addmm(out, x, weight[:, c : c + d].t())
+        w = weight[:, c : c + d].t()
+        # the first product writes a new (P, out) tensor; the others accumulate into it in place (an out-of-place
+        # addmm would copy the (P, out) partial sum first; addmm's backward does not need it)
+        out = torch.addmm(out, x, w) if i == 0 else out.addmm_(x, w)
         c += d
     if c != weight.shape[1]:
         raise ValueError(f"linear_blocks: blocks give {c} inputs, the weight takes {weight.shape[1]}")
@@ -258,8 +268,10 @@ class SDFNetwork(torch.nn.Module):
         a, slope = _softplus_and_slope(linear_blocks(blocks, ws[0], bs[0]), self.fast)  # no (P, in) concatenation
         slopes = [slope]
         for i in range(1, n_lin - 1):
-            z = linear_blocks([a, pe], ws[i], bs[i]) if i in self.skip else torch.addmm(bs[i], a, ws[i].t())
-            a, slope = _softplus_and_slope(z, self.fast)
+            if i in self.skip:
+                a, slope = _softplus_and_slope(linear_blocks([a, pe], ws[i], bs[i]), self.fast)
+            else:  # the bias added by the softplus kernel (the same float sum as addmm's)
+                a, slope = _softplus_and_slope(a @ ws[i].t(), self.fast, bs[i])
             slopes.append(slope)
         out = linear_blocks([a, pe], ws[-1], bs[-1]) if n_lin - 1 in self.skip else torch.addmm(bs[-1], a, ws[-1].t())
         sdf_net = out[:, 0]  # normalised units (MonoSDF: the MLP output is the SDF)
