@@ -521,19 +521,8 @@ std::vector<torch::Tensor> jacobian_contract_backward(torch::Tensor jac, torch::
 }
 
 // Softplus(beta) and its slope sigmoid(beta z) in one pass (the SDF MLP needs both), and the fused
-// backward: grad_z = g_a * s + g_s * beta * s * (1 - s). ``bias``: empty, or (C,) added to every row of the
-// (P, C) ``z`` as it is read (a layer's bias, so its product needs no bias pass of its own: ``addmm`` copies the
-// bias into its output before the product; the float sum is the same, mm(x, W) + b).
-static inline void softplus_slope_one(float z, float b, float inv_b, float* a, float* s) {
-    // branch-free so the loops vectorise (expf / logf from libmvec)
-    const float bz = b * z;
-    const float e = expf(fmaxf(-fabsf(bz), -80.f));  // in [e^-80, 1]: no overflow; the floor keeps libmvec off its scalar underflow path (e^-80 = 1.8e-35 is 0 next to 1)
-    const float inv = 1.f / (1.f + e);
-    *s = bz >= 0.f ? inv : e * inv;
-    *a = fmaxf(z, 0.f) + logf(1.f + e) * inv_b;
-}
-
-std::vector<torch::Tensor> softplus_slope_forward(torch::Tensor z, torch::Tensor bias, double beta) {
+// backward: grad_z = g_a * s + g_s * beta * s * (1 - s).
+std::vector<torch::Tensor> softplus_slope_forward(torch::Tensor z, double beta) {
     auto zc = z.contiguous();
     auto a = torch::empty_like(zc);
     auto s = torch::empty_like(zc);
@@ -542,23 +531,14 @@ std::vector<torch::Tensor> softplus_slope_forward(torch::Tensor z, torch::Tensor
     float* sp = s.data_ptr<float>();
     const float b = (float)beta, inv_b = 1.f / (float)beta;
     const int64_t n = zc.numel();
-    if (bias.numel() == 0) {
 #pragma omp parallel for simd schedule(static)
-        for (int64_t i = 0; i < n; ++i) softplus_slope_one(zp[i], b, inv_b, ap + i, sp + i);
-        return {a, s};
-    }
-    const int64_t C = bias.numel();
-    TORCH_CHECK(zc.dim() == 2 && zc.size(1) == C, "softplus_slope_forward: a bias of ", C, " for z of shape ", zc.sizes());
-    auto bc = bias.contiguous();
-    const float* bp = bc.data_ptr<float>();
-    const int64_t rows = zc.size(0);
-#pragma omp parallel for schedule(static)
-    for (int64_t r = 0; r < rows; ++r) {
-        const float* zr = zp + r * C;
-        float* ar = ap + r * C;
-        float* sr = sp + r * C;
-#pragma omp simd
-        for (int64_t j = 0; j < C; ++j) softplus_slope_one(zr[j] + bp[j], b, inv_b, ar + j, sr + j);
+    for (int64_t i = 0; i < n; ++i) {  // branch-free so the loop vectorises (expf / logf from libmvec)
+        const float z = zp[i];
+        const float bz = b * z;
+        const float e = expf(fmaxf(-fabsf(bz), -80.f));  // in [e^-80, 1]: no overflow; the floor keeps libmvec off its scalar underflow path (e^-80 = 1.8e-35 is 0 next to 1)
+        const float inv = 1.f / (1.f + e);
+        sp[i] = bz >= 0.f ? inv : e * inv;
+        ap[i] = fmaxf(z, 0.f) + logf(1.f + e) * inv_b;
     }
     return {a, s};
 }
@@ -590,7 +570,7 @@ bool set_flush_denormal_all_threads(bool on);
 std::vector<int64_t> flush_denormal_per_thread();
 
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
-    m.def("softplus_slope_forward", &softplus_slope_forward, "softplus(beta) and sigmoid(beta z) of z (+ bias)");
+    m.def("softplus_slope_forward", &softplus_slope_forward, "softplus(beta) and sigmoid(beta z)");
     m.def("softplus_slope_backward", &softplus_slope_backward, "fused backward of softplus_slope");
     m.def("forward", &grid_forward, "grid features + Jacobian");
     m.def("set_simd_kernel", [](bool on) { g_simd = on; }, "the AVX-512 grid kernels (default where compiled) or the per-point ones");

@@ -39,23 +39,18 @@ SOFTPLUS_BETA = 100.0
 _INV_SQRT2 = 1.0 / math.sqrt(2.0)
 
 
-def softplus_and_slope_reference(z: torch.Tensor, bias: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
-    """Softplus(beta=100) and its derivative sigmoid(beta z) of ``z`` (+ ``bias``, broadcast over rows) (plain
-    PyTorch twin of the fused kernel)."""
-    if bias is not None:
-        z = z + bias
+def softplus_and_slope_reference(z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Softplus(beta=100) and its derivative sigmoid(beta z) (plain PyTorch twin of the fused kernel)."""
     return F.softplus(z, beta=SOFTPLUS_BETA), torch.sigmoid(SOFTPLUS_BETA * z)
 
 
 class _SoftplusSlope(torch.autograd.Function):
-    """Fused C++ softplus + slope of ``z`` (P, C) plus an optional (C,) bias, with a fused backward (the MLP needs
-    both outputs). The bias added in the kernel spares its layer's product the bias pass of ``addmm``."""
+    """Fused C++ softplus + slope with a fused backward (the MLP needs both outputs)."""
 
     @staticmethod
-    def forward(ctx, z: torch.Tensor, bias: torch.Tensor | None):  # type: ignore[override]
-        a, s = _load_extension().softplus_slope_forward(z, torch.zeros(0) if bias is None else bias, SOFTPLUS_BETA)
+    def forward(ctx, z: torch.Tensor):  # type: ignore[override]
+        a, s = _load_extension().softplus_slope_forward(z, SOFTPLUS_BETA)
         ctx.save_for_backward(s)
-        ctx.with_bias = bias is not None
         return a, s
 
     @staticmethod
@@ -64,15 +59,13 @@ class _SoftplusSlope(torch.autograd.Function):
         if grad_a is None:
             grad_a = torch.zeros_like(s)
         gs = grad_s if grad_s is not None else torch.zeros(0)
-        grad_z = _load_extension().softplus_slope_backward(grad_a, gs, s, SOFTPLUS_BETA)
-        return grad_z, (grad_z.sum(0) if ctx.with_bias and ctx.needs_input_grad[1] else None)
+        return _load_extension().softplus_slope_backward(grad_a, gs, s, SOFTPLUS_BETA)
 
 
-def _softplus_and_slope(z: torch.Tensor, fast: bool, bias: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
-    """Softplus and slope of ``z`` (+ ``bias``): the C++ kernel when ``fast`` (and built), else the reference."""
+def _softplus_and_slope(z: torch.Tensor, fast: bool) -> tuple[torch.Tensor, torch.Tensor]:
     if fast and z.dtype == torch.float32 and fast_available():
-        return _SoftplusSlope.apply(z, bias)
-    return softplus_and_slope_reference(z, bias)
+        return _SoftplusSlope.apply(z)
+    return softplus_and_slope_reference(z)
 
 
 class _PEChain(torch.autograd.Function):
@@ -268,10 +261,8 @@ class SDFNetwork(torch.nn.Module):
         a, slope = _softplus_and_slope(linear_blocks(blocks, ws[0], bs[0]), self.fast)  # no (P, in) concatenation
         slopes = [slope]
         for i in range(1, n_lin - 1):
-            if i in self.skip:
-                a, slope = _softplus_and_slope(linear_blocks([a, pe], ws[i], bs[i]), self.fast)
-            else:  # the bias added by the softplus kernel (the same float sum as addmm's)
-                a, slope = _softplus_and_slope(a @ ws[i].t(), self.fast, bs[i])
+            z = linear_blocks([a, pe], ws[i], bs[i]) if i in self.skip else torch.addmm(bs[i], a, ws[i].t())
+            a, slope = _softplus_and_slope(z, self.fast)
             slopes.append(slope)
         out = linear_blocks([a, pe], ws[-1], bs[-1]) if n_lin - 1 in self.skip else torch.addmm(bs[-1], a, ws[-1].t())
         sdf_net = out[:, 0]  # normalised units (MonoSDF: the MLP output is the SDF)

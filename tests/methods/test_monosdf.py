@@ -248,36 +248,6 @@ def test_encoding_kernels_match_reference_values_and_gradient():
     assert sdf.shape == (0,) and grad.shape == (0, 3)
 
 
-def test_softplus_kernel_with_a_bias_matches_the_reference_and_addmm_bitwise():
-    """The C++ softplus + slope with the layer's bias folded in: values and the gradients of ``z`` and of the bias
-    against the PyTorch twin; and the same floats, bit for bit, as the kernel on ``addmm(b, a, W^T)`` (the layer
-    as it was computed before the fold: ``addmm`` adds the bias after the product, as the kernel does), so runs
-    keep their results and their job ids."""
-    from methods.monosdf.field import _softplus_and_slope
-    from methods.monosdf.grid import fast_available
-
-    if not fast_available():
-        pytest.skip("C++ extension not built")
-    g = torch.Generator().manual_seed(0)
-    a = torch.randn(300, 32, generator=g) * 0.1
-    w = torch.randn(32, 32, generator=g) * 0.3
-    b = (torch.randn(32, generator=g) * 0.05).requires_grad_()
-    z = (a @ w.t()).requires_grad_()
-    outs = {}
-    for fast in (True, False):
-        act, slope = _softplus_and_slope(z, fast, b)
-        gz, gb = torch.autograd.grad((act * 0.7).sum() + (slope * torch.linspace(-1, 1, 32)).sum(), [z, b])
-        outs[fast] = (act, slope, gz, gb)
-    for got, want in zip(outs[True], outs[False]):  # float rounding of expf / logf (libmvec) vs PyTorch's
-        torch.testing.assert_close(got, want, atol=1e-6 * max(1.0, float(want.abs().max())), rtol=1e-4)
-    with torch.no_grad():
-        folded = _softplus_and_slope(a @ w.t(), True, b)
-        unfolded = _softplus_and_slope(torch.addmm(b, a, w.t()), True)
-    assert all(torch.equal(x, y) for x, y in zip(folded, unfolded))
-    with pytest.raises(RuntimeError, match="a bias of 5"):
-        _softplus_and_slope(z.detach(), True, torch.zeros(5))
-
-
 def test_linear_blocks_equals_linear_of_the_concatenation():
     lin = torch.nn.Linear(55, 32)
     a = torch.randn(400, 16, requires_grad=True)
