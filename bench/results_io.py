@@ -16,7 +16,7 @@ from bench.jobs import REQUIRED_FIELDS, RESULT_SCHEMA
 RESULT_COLUMNS = [
     "job_id", "base_id", "table", "row", "method", "group", "dataset", "scene", "seed", "scale", "status",
     "error_type", "error_message", "metrics", "timings", "iterations", "curve", "config", "created",
-    "worker", "versions", "cpu", "path",
+    "worker", "versions", "cpu", "wall_seconds", "worker_name", "path",
 ]
 
 
@@ -55,7 +55,7 @@ def _read_job(path: Path) -> dict[str, Any]:
         "iterations": d.get("iterations"), "curve": list(d.get("curve") or []),
         "config": dict(d.get("config") or {}), "created": str(d.get("created") or ""),
         "worker": d.get("worker"), "versions": dict(d.get("versions") or {}),
-        "cpu": d.get("cpu"), "path": str(path),
+        "cpu": d.get("cpu"), "wall_seconds": d.get("wall_seconds"), "worker_name": d.get("worker_name"), "path": str(path),
     }
 
 

@@ -1,7 +1,8 @@
 """Where a table run's wall time went: each job's interval on its worker, the workers' idle time, the job
 cost by kind.
 
-Reads the job rows of a results folder (``bench run --out OUT``: ``OUT/SCALE/jobs/*.json``). A finished row
+Reads the job rows of a results folder (``bench run --out OUT``: ``OUT/SCALE/jobs/*.json``, through
+:func:`bench.results_io.collect_results`, which skips the writer's temporaries and names a corrupt file). A finished row
 records when its job started (``created``, UTC, whole seconds: :func:`bench.jobs.row_head`, written as the job
 begins, after its dataset is prepared) and how long it took on its worker (``wall_seconds``), so the job ran in
 ``[created, created + wall_seconds]`` on ``worker_name``; a failed row is created when the job fails, so it
@@ -9,7 +10,8 @@ ran in ``[created - wall_seconds, created]``. Prints:
 
 * the span (first start to last end), the job-seconds, and the workers' utilisation
   (job-seconds / (workers x span)): what the scheduling lost to idle cores;
-* job-seconds, job count and mean job time per kind (method x trained / fusion-only) and per table;
+* job-seconds, job count and mean job time per kind (method; a job without an optimisation schedule, the TSDF
+  fusion references, marked "fusion only": :func:`bench.jobs.is_trained`) and per table;
 * the longest idle gaps (a worker waiting while another still runs: the tail of the run).
 
 ``--png`` draws the run as a Gantt chart (one lane per worker, a bar per job, coloured by table row, or
@@ -26,29 +28,31 @@ from __future__ import annotations
 
 import argparse
 import datetime as _dt
-import json
 from pathlib import Path
 from typing import Any
 
 import pandas as pd
 
-FUSION_ONLY = ("oracle_tsdf", "priors_only")  # methods whose jobs train nothing (TSDF fusion of given depth)
+from bench.jobs import is_trained
+from bench.results_io import collect_results
 
 
-def job_intervals(rows: list[dict[str, Any]]) -> pd.DataFrame:
-    """Job rows (the result JSONs, as dicts) -> one row per job that ran: ``job_id, table, row, method, scene, seed,
-    worker, start, end, seconds`` (start / end in seconds since the first start; worker = ``worker_name``)."""
+def job_intervals(results: pd.DataFrame) -> pd.DataFrame:
+    """Result rows (:func:`bench.results_io.collect_results`) -> one row per job that ran: ``job_id, table, row, method,
+    scene, seed, worker, trained, start, end, seconds`` (start / end in seconds since the first start; worker =
+    ``worker_name``; trained: :func:`bench.jobs.is_trained` of its config)."""
     recs = []
-    for r in rows:
+    for r in results.to_dict("records"):
         wall = r.get("wall_seconds")
-        if wall is None or not r.get("created"):
+        if wall is None or pd.isna(wall) or not r.get("created"):
             continue
         stamp = _dt.datetime.fromisoformat(str(r["created"])).timestamp()
-        start = stamp if r.get("status") == "ok" else stamp - float(wall)  # see the module docstring
-        recs.append({"job_id": r.get("job_id"), "table": r.get("table"), "row": r.get("row"), "method": r.get("method"),
-                     "scene": r.get("scene"), "seed": r.get("seed"), "worker": str(r.get("worker_name")),
+        start = stamp if r["status"] == "ok" else stamp - float(wall)  # see the module docstring
+        recs.append({"job_id": r["job_id"], "table": r["table"], "row": r["row"], "method": r["method"], "scene": r["scene"],
+                     "seed": r["seed"], "worker": str(r.get("worker_name")), "trained": is_trained(r.get("config")),
                      "start": start, "end": start + float(wall), "seconds": float(wall)})
-    df = pd.DataFrame(recs, columns=["job_id", "table", "row", "method", "scene", "seed", "worker", "start", "end", "seconds"])
+    df = pd.DataFrame(recs, columns=["job_id", "table", "row", "method", "scene", "seed", "worker", "trained", "start", "end",
+                                     "seconds"])
     if len(df):
         t0 = df["start"].min()
         df["start"] -= t0
@@ -79,7 +83,7 @@ def summary(df: pd.DataFrame) -> dict[str, Any]:
     ``by_kind`` and ``by_table`` (DataFrames: jobs, job-seconds, mean seconds)."""
     span = float(df["end"].max() - df["start"].min()) if len(df) else 0.0
     workers = int(df["worker"].nunique())
-    kind = df["method"].where(~df["method"].isin(FUSION_ONLY), df["method"] + " (fusion only)")
+    kind = df["method"].where(df["trained"], df["method"] + " (fusion only)")
     agg = {"jobs": ("seconds", "size"), "job_seconds": ("seconds", "sum"), "mean_seconds": ("seconds", "mean"),
            "max_seconds": ("seconds", "max")}
     return {"span": span, "job_seconds": float(df["seconds"].sum()), "workers": workers,
@@ -123,11 +127,10 @@ def main() -> None:
     ap.add_argument("--colour-by", choices=("row", "method", "table"), default="row", help="what the chart's colours tell apart")
     ap.add_argument("--gaps", type=int, default=5, help="how many of the longest idle gaps to list")
     args = ap.parse_args()
-    folder = args.out / args.scale / "jobs"
-    files = sorted(folder.glob("*.json"))
-    if not files:
-        raise SystemExit(f"run_timeline: no job rows in {folder}")
-    df = job_intervals([json.loads(f.read_text()) for f in files])
+    results = collect_results(args.out / args.scale)
+    if results.empty:
+        raise SystemExit(f"run_timeline: no job rows in {args.out / args.scale / 'jobs'}")
+    df = job_intervals(results)
     s = summary(df)
     print(f"{len(df)} jobs on {s['workers']} workers: span {s['span'] / 60:.1f} min, {s['job_seconds'] / 60:.1f} job-minutes, "
           f"utilisation {100 * s['utilisation']:.1f} %")

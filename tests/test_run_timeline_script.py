@@ -9,8 +9,17 @@ import pytest
 
 def _row(job: str, worker: str, start: str, wall: float, method: str = "monosdf", table: str = "ablation",
          status: str = "ok") -> dict:
-    return {"job_id": job, "table": table, "row": "r", "method": method, "scene": "s", "seed": 0, "worker_name": worker,
-            "created": start, "wall_seconds": wall, "status": status}
+    """A stored result row (the fields ``collect_results`` requires); oracle_tsdf jobs have no schedule."""
+    return {"job_id": job, "table": table, "row": "r", "method": method, "scene": "s", "dataset": "scannet", "seed": 0,
+            "scale": "small", "worker_name": worker, "created": start, "wall_seconds": wall, "status": status,
+            "config": {"iterations": 0 if method == "oracle_tsdf" else 2000}}
+
+
+def _write(root, rows: list[dict]) -> None:
+    folder = root / "small" / "jobs"
+    folder.mkdir(parents=True)
+    for r in rows:
+        (folder / f"{r['job_id']}.json").write_text(json.dumps(r))
 
 
 def _rows() -> list[dict]:
@@ -22,9 +31,13 @@ def _rows() -> list[dict]:
             {**_row("j5", "b", "2026-01-01T00:00:00+00:00", 0.0), "wall_seconds": None}]  # never ran: skipped
 
 
-def test_intervals_gaps_and_utilisation(load_script):
+def test_intervals_gaps_and_utilisation(load_script, tmp_path):
+    from bench.results_io import collect_results
+
     rt = load_script("run_timeline")
-    df = rt.job_intervals(_rows())
+    _write(tmp_path, _rows())
+    (tmp_path / "small" / "jobs" / ".tmp-j6.json").write_text("{half-written")  # the atomic writer's temporary: skipped
+    df = rt.job_intervals(collect_results(tmp_path / "small"))
     assert list(df["job_id"]) == ["j1", "j3", "j4", "j2"]
     j4 = df[df["job_id"] == "j4"].iloc[0]
     assert (j4["start"], j4["end"]) == (90.0, 150.0)
@@ -39,10 +52,7 @@ def test_intervals_gaps_and_utilisation(load_script):
 
 
 def test_the_script_prints_the_summary_and_draws_the_chart(load_script, tmp_path, monkeypatch, capsys):
-    folder = tmp_path / "small" / "jobs"
-    folder.mkdir(parents=True)
-    for r in _rows():
-        (folder / f"{r['job_id']}.json").write_text(json.dumps(r))
+    _write(tmp_path, _rows())
     png = tmp_path / "t.png"
     monkeypatch.setattr("sys.argv", ["run_timeline", str(tmp_path), "--png", str(png)])
     load_script("run_timeline").main()
