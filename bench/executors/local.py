@@ -10,7 +10,10 @@ worker process dies (killed, segfault, out of memory), the standard library pool
 terminates all its workers, and it cannot say which job's process died. So the jobs that were in
 flight are rerun one at a time in a fresh pool, uncharged; a job whose worker dies while it runs
 alone is charged one attempt and resubmitted, at most ``retries`` more times, then recorded as a
-``WorkerLost`` failure row. Innocent bystanders of a crash therefore never use up their retries.
+``WorkerLost`` failure row. Innocent bystanders of a crash therefore never use up their retries. A
+worker can also die between two submissions (its job still in flight, another just finished): the
+next ``submit`` then finds the pool broken; that job has not started, so it goes back to the front of
+its queue, uncharged, and the in-flight futures report the break as above.
 """
 
 from __future__ import annotations
@@ -96,9 +99,19 @@ class LocalExecutor(Executor):
                 if self._pool is None:
                     self._pool = self._new_pool()
                 while (isolate and not inflight) or (not isolate and queue and len(inflight) < self.workers):
-                    job, attempt = (isolate or queue).popleft()
-                    inflight[self._pool.submit(self.task, job, cache_dir, attempt, self.threads)] = (job, attempt)
+                    source = isolate or queue
+                    job, attempt = source.popleft()
+                    try:
+                        future = self._pool.submit(self.task, job, cache_dir, attempt, self.threads)
+                    except BrokenProcessPool:  # a worker died after the last wait(): this job never started
+                        source.appendleft((job, attempt))
+                        if not inflight:  # no in-flight future will report the break: start a fresh pool
+                            self._discard_pool()
+                        break  # else the in-flight futures fail with BrokenProcessPool below
+                    inflight[future] = (job, attempt)
                     yield Event("started", job, attempt=attempt)
+                if self._pool is None:
+                    continue
                 finished, _ = wait(list(inflight), timeout=1.0, return_when=FIRST_COMPLETED)
                 victims: list[tuple["Job", int]] = []
                 for fut in finished:

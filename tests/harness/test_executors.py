@@ -30,8 +30,12 @@ def _job(i: int, tag: str = "") -> Job:
 
 def fake_task(job: Job, cache_dir, attempt: int = 1, threads=None, *args, **kwargs) -> dict:
     """A fake job. ``config.tag``: "crash1" kills its worker on attempt 1, "crash" on every attempt,
-    "raise" raises (an error outside the job's own code), anything else returns an ok row."""
+    "crashlate" after 0.5 s, "raise" raises (an error outside the job's own code), anything else
+    returns an ok row."""
     tag = job.config["tag"]
+    if tag == "crashlate":
+        time.sleep(0.5)
+        os.kill(os.getpid(), signal.SIGKILL)
     if tag == "crash" or (tag == "crash1" and attempt == 1):
         os.kill(os.getpid(), signal.SIGKILL)
     if tag == "raise":
@@ -83,6 +87,23 @@ def test_local_pool_bounded_retries_then_a_clear_failure_row(tmp_path):
     row = done[0].row
     assert row["status"] == "failed" and row["error"]["type"] == WORKER_LOST and row["attempts"] == 2
     assert "died 2 time(s)" in row["error"]["message"]
+
+
+@pytest.mark.slow
+def test_local_pool_a_worker_dying_between_submissions_loses_no_job(tmp_path):
+    """Job 1 finishes, and while the consumer handles its row job 0's worker dies: the next submit
+    finds the pool broken (CI failure, stop 45). Job 2 had not started: it must run, uncharged."""
+    jobs = [_job(0, "crashlate"), _job(1, "ok"), _job(2, "ok")]
+    events = []
+    with LocalExecutor(workers=2, retries=0, task=fake_task) as ex:
+        for event in ex.run(jobs, tmp_path / "cache"):
+            events.append(event)
+            if event.kind == "done" and event.job.job_id == jobs[1].job_id:
+                time.sleep(2.0)  # job 0's worker dies meanwhile
+    done = {e.job.job_id: e.row for e in events if e.kind == "done"}
+    assert len([e for e in events if e.kind == "done"]) == 3 and set(done) == {j.job_id for j in jobs}
+    assert done[jobs[0].job_id]["error"]["type"] == WORKER_LOST
+    assert done[jobs[2].job_id]["status"] == "ok" and done[jobs[2].job_id]["attempts"] == 1
 
 
 @pytest.mark.slow
