@@ -403,7 +403,7 @@ def _interrupt_on_sigterm() -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    if argv is None:  # the console script, not a test calling main([...]): MKL's AVX-512 path on a non-Intel CPU
+    if argv is None:  # the console script, not a test calling main([...]): MKL's Intel (AVX-512 / AVX2) path on a non-Intel CPU
         from bench.mkl_dispatch import reexec_with_mkl_shim
 
         reexec_with_mkl_shim()  # re-executes this command once with the shim preloaded, or returns

@@ -1,18 +1,22 @@
-"""MKL's AVX-512 code path on non-Intel CPUs: a process-level switch for ``bench`` and the benchmarks.
+"""MKL's Intel code paths (AVX-512, AVX2) on non-Intel CPUs: a process-level switch for ``bench`` and the benchmarks.
 
 The pinned torch CPU wheel does its float32 matrix products (``aten::mm`` / ``addmm``: every MLP layer of
 MonoSDF and MonoInstance, forward and backward) with Intel oneMKL. MKL picks its code path by CPU *vendor*
 (``mkl_serv_intel_cpu_true``), not by the instructions the CPU has: on an AMD CPU with AVX-512 it runs a
 generic path. Measured on this project's 2-core AMD EPYC (Zen 5, AVX-512), 1 thread, float32
 (``benchmarks/bench_mkl_dispatch.py``): the (32768 x 32) @ (32 x 32) product of our MLP layers 91 -> 233
-GFLOP/s, 1024^3 111 -> 254 GFLOP/s; a whole MonoSDF training step 62-65 -> 51-55 ms (README, speed).
+GFLOP/s, 1024^3 111 -> 254 GFLOP/s; a whole MonoSDF training step 62-65 -> 51-55 ms (README, speed). On an
+AMD EPYC without AVX-512 (Zen 3, AVX2; session 28) MKL's AVX2 path instead of the generic one: the MLP
+products 55-74 -> 67-94 GFLOP/s (1024^3 unchanged at ~90, the core's peak), a step -8 % (best of 40 steps
+85-94 -> 79-85 ms, process CPU time, 1 thread, five alternating pairs).
 
 The switch is the long-known interposition of that one function: a shared library defining
 ``int mkl_serv_intel_cpu_true(void) { return 1; }``, loaded first with ``LD_PRELOAD``. MKL then checks the
 CPU's actual instruction set (CPUID feature bits) as it does on an Intel CPU, and takes the AVX-512 path
-only where the CPU reports AVX-512. The dynamic loader resolves the symbol at process start, so the switch
-needs a new process: :func:`reexec_with_mkl_shim` re-executes the ``bench`` command once with the library
-preloaded (workers, the fork server and Dask's local workers inherit the environment).
+where the CPU reports AVX-512, else the AVX2 path where it reports AVX2 and FMA. The dynamic loader resolves
+the symbol at process start, so the switch needs a new process: :func:`reexec_with_mkl_shim` re-executes the
+``bench`` command once with the library preloaded (workers, the fork server and Dask's local workers inherit
+the environment).
 
 What changes is the order of float operations inside each matrix product, nothing else: the same inputs give
 the same products to float32 rounding (``tests/harness/test_mkl_dispatch.py`` compares the two paths on
@@ -20,9 +24,9 @@ matrices and on whole MonoSDF steps). Long training runs are chaotic to rounding
 so the path is recorded in every job row (``blas``) and enters the full job id like the thread count
 (:func:`bench.runner.job_id_for`): a row computed on the other path is never silently reused.
 
-Off switch: ``BENCH_MKL_AVX512=0`` (the generic path, exactly as before this module). Nothing happens on an
-Intel CPU (MKL takes its AVX-512 path there anyway), on a CPU without AVX-512, off Linux, or without a C
-compiler (a one-line note on stderr).
+Off switch: ``BENCH_MKL_AVX512=0`` (the generic path, exactly as before this module; the name is older than
+the AVX2 case, which it switches off too). Nothing happens on an Intel CPU (MKL takes its own paths there), on
+a CPU with neither AVX-512 nor AVX2 + FMA, off Linux, or without a C compiler (a one-line note on stderr).
 """
 
 from __future__ import annotations
@@ -35,7 +39,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-ENV_SWITCH = "BENCH_MKL_AVX512"      # "0": keep MKL's generic path
+ENV_SWITCH = "BENCH_MKL_AVX512"      # "0": keep MKL's generic path (also on an AVX2-only CPU)
 ENV_TRIED = "BENCH_MKL_SHIM_TRIED"   # set before the re-exec: never loop
 SHIM_SOURCE = "int mkl_serv_intel_cpu_true(void) { return 1; }\n"
 SHIM_STEM = "libbench_mkl_intel_path"
@@ -44,26 +48,29 @@ SHIM_STEM = "libbench_mkl_intel_path"
 MKL_CODE_PATHS = {0: "generic (non-Intel CPU)", 3: "SSE4.2", 5: "AVX2", 7: "AVX-512"}
 
 
-def cpu_facts(cpuinfo: str) -> tuple[str, bool]:
-    """(vendor id, has AVX-512F) from the text of ``/proc/cpuinfo`` (first processor block)."""
-    vendor, avx512 = "", False
+def cpu_facts(cpuinfo: str) -> tuple[str, str]:
+    """(vendor id, widest vector extension MKL has a path for: ``"avx512"`` (AVX-512F), ``"avx2"`` (AVX2 and
+    FMA) or ``""``) from the text of ``/proc/cpuinfo`` (first processor block)."""
+    vendor, simd = "", ""
     for line in cpuinfo.splitlines():
         key, _, value = line.partition(":")
         key = key.strip()
         if key == "vendor_id" and not vendor:
             vendor = value.strip()
         elif key == "flags":
-            avx512 = "avx512f" in value.split()
+            flags = set(value.split())
+            simd = "avx512" if "avx512f" in flags else "avx2" if {"avx2", "fma"} <= flags else ""
             break
-    return vendor, avx512
+    return vendor, simd
 
 
 def wants_shim(cpuinfo: str, env: dict[str, str] | os._Environ[str], platform: str = sys.platform) -> bool:
-    """Whether this process should run with the shim: Linux, a non-Intel CPU with AVX-512F, not switched off."""
+    """Whether this process should run with the shim: Linux, a non-Intel CPU with AVX-512F or AVX2 + FMA, not
+    switched off."""
     if platform != "linux" or env.get(ENV_SWITCH, "1") == "0":
         return False
-    vendor, avx512 = cpu_facts(cpuinfo)
-    return bool(vendor) and vendor != "GenuineIntel" and avx512
+    vendor, simd = cpu_facts(cpuinfo)
+    return bool(vendor) and vendor != "GenuineIntel" and bool(simd)
 
 
 def _read_cpuinfo() -> str:
@@ -116,9 +123,12 @@ def shim_loaded() -> bool:
 
 
 def blas_path() -> str:
-    """``"mkl-avx512-shim"`` when the shim is loaded, else ``"default"``: recorded in every job row and
-    in the full job id (only when not ``"default"``, so ids from before this switch are unchanged)."""
-    return "mkl-avx512-shim" if shim_loaded() else "default"
+    """``"mkl-avx512-shim"`` / ``"mkl-avx2-shim"`` when the shim is loaded (by the CPU's widest extension: the
+    path MKL then takes), else ``"default"``: recorded in every job row and in the full job id (only when not
+    ``"default"``, so ids from before this switch are unchanged)."""
+    if not shim_loaded():
+        return "default"
+    return f"mkl-{cpu_facts(_read_cpuinfo())[1] or 'generic'}-shim"
 
 
 def mkl_code_path() -> str:

@@ -59,7 +59,7 @@ def main() -> None:
     from bench.machine import cpu_description
     from bench.mkl_dispatch import mkl_code_path, reexec_with_mkl_shim
 
-    reexec_with_mkl_shim()  # MKL's AVX-512 path on a non-Intel CPU, as `bench` runs (BENCH_MKL_AVX512=0: the generic path)
+    reexec_with_mkl_shim()  # MKL's Intel (AVX-512 / AVX2) path on a non-Intel CPU, as `bench` runs (BENCH_MKL_AVX512=0: the generic path)
     print(f"matrix products: MKL {mkl_code_path()} path; CPU: {cpu_description()}")
     from torch.utils.flop_counter import FlopCounterMode
 

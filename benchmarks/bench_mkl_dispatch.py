@@ -1,4 +1,4 @@
-"""Benchmark: float32 matrix products of the MLP shapes on MKL's generic path vs its AVX-512 path (bench/mkl_dispatch.py).
+"""Benchmark: float32 matrix products of the MLP shapes on MKL's generic path vs its AVX-512 or AVX2 path (bench/mkl_dispatch.py).
 
 Runs itself twice in fresh processes, with ``BENCH_MKL_AVX512=0`` (MKL's own choice: the generic path on a
 non-Intel CPU) and ``=1`` (the shim preloaded where :func:`bench.mkl_dispatch.wants_shim` says so), and prints
