@@ -7,7 +7,7 @@ and a per-op breakdown from torch.profiler.
 Usage:
     .venv/bin/python benchmarks/bench_monosdf_step.py [--scene scannet_like_0] [--scale small] [--steps 20]
         [--rays 512] [--reference-grid | --per-point-grid] [--threads 2] [--no-profile] [--set prune_weight=1e-4]
-        [--train 2000 --checkpoint /tmp/monosdf_2000.pt] [--cpu-time] [--phases] [--processes 2]
+        [--train 2000 --checkpoint /tmp/monosdf_2000.pt] [--cpu-time] [--phases] [--processes 2] [--compile]
 
 ``--train N`` times the step at a late point of a schedule (beta small, most samples weightless: where
 ``prune_weight`` pays): N steps are trained first (with the config's other keys) and cached in
@@ -15,7 +15,10 @@ Usage:
 shared machine wall time includes time the process waited for a core. ``--processes N`` runs N copies of the
 benchmark side by side, each with one thread and no profile (how ``bench run`` uses 2 cores: two single-threaded
 jobs), and prints their summed throughput (the copies share memory bandwidth and caches, so this is below N times
-the throughput of one copy alone).
+the throughput of one copy alone). ``--compile`` wraps the SDF and colour networks' forward in ``torch.compile``
+(``dynamic=True``; the C++ kernels are graph breaks) and prints the warmup's wall time, compilation included
+(Inductor's on-disk cache, ``TORCHINDUCTOR_CACHE_DIR``, shortens it in later processes); the harness does not use it
+(session 28: no gain, docs/monosdf.md).
 
 Goals: issue 4, >= 0.5 M ray-samples/s (met in session 4); issue 16, >= 2 M on 2 cores (session 21: 1.36 M for one job
 on 2 threads, 1.66 M for two single-threaded copies side by side, ``--processes 2``).
@@ -133,6 +136,8 @@ def main() -> None:
                     "SDF with gradient, colour, backward, optimiser) over --steps more steps")
     ap.add_argument("--processes", type=int, default=1, help="run this many single-threaded copies side by side and "
                     "print their summed throughput (the tables' regime: one job per core)")
+    ap.add_argument("--compile", action="store_true", help="torch.compile the SDF and colour networks' forward "
+                    "(an experiment: not used by the harness); prints the warmup's wall time, compilation included")
     args = ap.parse_args()
     if args.processes > 1:
         run_side_by_side(args.processes)
@@ -165,8 +170,14 @@ def main() -> None:
             if args.checkpoint:
                 trainer.save(args.checkpoint)
         print(f"state after {trainer.step_count} steps: beta {float(trainer.density.beta().detach()):.4f}")
+    if args.compile:
+        trainer.sdf.forward = torch.compile(trainer.sdf.forward, dynamic=True)  # type: ignore[method-assign]
+        trainer.color.forward = torch.compile(trainer.color.forward, dynamic=True)  # type: ignore[method-assign]
+    t = time.perf_counter()
     for _ in range(args.warmup):
         trainer.step()
+    if args.compile:
+        print(f"torch.compile: {args.warmup} warmup steps took {time.perf_counter() - t:.1f} s wall, compilation included")
     clock = time.process_time if args.cpu_time else time.perf_counter
     times = []
     sum0, count0 = trainer._log_sums.get("samples_rendered", 0.0), trainer._log_count

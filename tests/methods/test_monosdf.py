@@ -143,10 +143,11 @@ def test_explicit_sdf_gradient_backpropagates_like_double_backward(fast, pe, rad
 
     terms = {"eikonal": lambda g: ((g.norm(dim=-1) - 1) ** 2).mean(),
              "normal": lambda g: (g * target.to(g.dtype)).sum(-1).mean()}
+    grad = net(x)[2]  # the explicit gradient, evaluated once for both terms
+    twin = sdf_gradient_autograd(net64, x.double(), create_graph=True)  # autograd's double backward, slow path
     for name, loss_of in terms.items():
-        explicit = torch.autograd.grad(loss_of(net(x)[2]), params_of(net), allow_unused=True)
-        twin = sdf_gradient_autograd(net64, x.double(), create_graph=True)  # autograd's double backward, slow path
-        reference = torch.autograd.grad(loss_of(twin), params_of(net64), allow_unused=True)
+        explicit = torch.autograd.grad(loss_of(grad), params_of(net), allow_unused=True, retain_graph=True)
+        reference = torch.autograd.grad(loss_of(twin), params_of(net64), allow_unused=True, retain_graph=True)
         for got, want in zip(explicit, reference):
             if want is None:
                 assert got is None or float(got.abs().max()) == 0.0
