@@ -72,6 +72,9 @@ def cmd_list(args: argparse.Namespace) -> int:
     for p in sorted(SCENES_DIR.glob("*.yaml")):
         r = load_recipe(p)
         print(f"  {r.name:20s} {r.kind:8s} {r.format}")
+    legacy = sorted(p.relative_to(SCENES_DIR).with_suffix("").as_posix() for p in (SCENES_DIR / "legacy").glob("*.yaml"))
+    if legacy:
+        print(f"  earlier room scenes, kept for the record (in no table): {' '.join(legacy)}")
     from bench.machine import cpu_description
     from bench.mkl_dispatch import blas_path, mkl_code_path
 

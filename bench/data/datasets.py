@@ -36,7 +36,8 @@ DEFAULT_CACHE = Path(os.environ["BENCH_CACHE"]).expanduser().absolute() if os.en
 
 
 def recipe_path(scene_name: str, scenes_dir: Path = SCENES_DIR) -> Path:
-    """Path of the recipe of ``scene_name``; BenchInputError if there is none."""
+    """Path of the recipe of ``scene_name`` (``configs/scenes/NAME.yaml``; a name may have a sub-folder,
+    ``legacy/scannet_like_0``); BenchInputError if there is none."""
     path = scenes_dir / f"{scene_name}.yaml"
     if not path.exists():
         known = sorted(p.stem for p in scenes_dir.glob("*.yaml"))
@@ -94,7 +95,8 @@ def ensure_dataset(scene_name: str, scale: str, cache_dir: Path = DEFAULT_CACHE,
         return Path(scene_name).expanduser()
 
     path = recipe_path(scene_name, scenes_dir)
-    out = Path(cache_dir) / f"{scene_name}-{scale}-{recipe_hash(path, effects)}"
+    # a recipe in a sub-folder of configs/scenes (``legacy/scannet_like_0``) gets a flat cache folder name
+    out = Path(cache_dir) / f"{scene_name.replace('/', '--')}-{scale}-{recipe_hash(path, effects)}"
     if not out.exists():
         make_dataset(path, out, scale=scale, effect_overrides={k: dict(v) for k, v in (effects or {}).items()})
     return out
