@@ -17,6 +17,7 @@ from bench.data.datasheet.capture import capture_stats, pair_ratios, visibility
 from bench.data.datasheet.photometric import TEXTURELESS_THRESHOLD, photometric_stats
 from bench.data.datasheet.priors import depth_prior_stats, normal_prior_stats
 from bench.data.datasheet.regions import REGION_NAMES, compute_regions
+from bench.data.datasheet.source import load_folder_with_gt
 from bench.data.datasheet.thin import thin_width_stats
 from bench.data.scene import InstanceInfo, Scene
 
@@ -236,6 +237,7 @@ def tiny_folder() -> Path:
 def test_scenes_make_stores_the_datasheet_and_writes_the_card(tiny_folder):
     meta = json.loads((tiny_folder / "meta.json").read_text())
     assert meta["metadata"]["datasheet"]["scene"]["prior_profile"] == "sim-omnidata"
+    assert compute_datasheet(*load_folder_with_gt(tiny_folder)) == meta["metadata"]["datasheet"]  # the folder measures alike
     assert (tiny_folder / "datasheet.md").read_text().startswith("# Datasheet: scannet_like_tiny")
     assert (tiny_folder / "datasheet.png").stat().st_size > 0
 

@@ -147,6 +147,7 @@ def datasheet_figure(sheet: dict[str, Any]) -> bytes:
     else:
         left.legend(fontsize=7, loc="lower right")
     hist = (sheet.get("capture") or {}).get("views_histogram") or []
+    hist = hist[: max((k for k, c in enumerate(hist) if c), default=0) + 1]  # up to the largest count of views seen
     right.bar(range(len(hist)), hist, width=0.9, color="0.4")
     right.xaxis.set_major_locator(MaxNLocator(integer=True))
     right.set(xlabel="views seeing the point", ylabel="sampled surface points",

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from bench.data.formats.codec import quantise_rgb
 from bench.data.scene import Scene
 
 from .capture import N_POINTS, SEED, capture_stats
@@ -56,7 +57,7 @@ def compute_datasheet(scene: Scene, gt_mesh: Any | None = None, n_points: int = 
         "regions": regions.fractions(),
         "depth_prior": None,
         "normal_prior": None,
-        "photometric": photometric_stats(scene.images, regions),
+        "photometric": photometric_stats(as_stored(scene.images), regions),
         "capture": capture_stats(scene, gt_mesh, n_points, seed),
         "thin_parts": thin_width_stats(regions.thin),
     }
@@ -66,6 +67,12 @@ def compute_datasheet(scene: Scene, gt_mesh: Any | None = None, n_points: int = 
     if scene.mono_normal is not None and scene.gt_normal is not None:
         sheet["normal_prior"] = normal_prior_stats(np.asarray(scene.mono_normal), np.asarray(scene.gt_normal), parts)
     return rounded(sheet)
+
+
+def as_stored(images: np.ndarray) -> np.ndarray:
+    """The images as a dataset folder stores them and its loader returns them (8-bit, read back as float32 /
+    255), so a synthesised scene and its written folder measure alike."""
+    return quantise_rgb(images).astype(np.float32) / np.float32(255.0)
 
 
 def rounded(obj: Any, digits: int = SIGNIFICANT_DIGITS) -> Any:
