@@ -4,6 +4,8 @@
     bench config METHOD [--scale S] [--set K=V]  a method's resolved, checked config (value and type per key)
     bench scenes make RECIPE --out DIR           synthesise a scene into a dataset folder
     bench scenes downsize SRC DST --factor N     a dataset folder at 1/N of its image size, same format
+    bench scenes card RECIPE|DIR [--scale S] [--seed N] [--out FILE.md]
+                                                 the scene's datasheet beside real-data anchors (docs/datasheet.md)
     bench run --table NAME [--scale small] ...   run a table's jobs, write CSV / markdown / plot
               [--executor local|dask] [--workers N] [--scheduler tcp://HOST:PORT] [--retries R]
     bench regress --table NAME [--scale small] [--update-reference]
@@ -258,6 +260,22 @@ def cmd_scenes_downsize(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_scenes_card(args: argparse.Namespace) -> int:
+    """Print the datasheet card of a recipe (synthesised in memory) or a dataset folder with GT; with
+    ``--out`` also write it (and its plot, FILE.png) there."""
+    from bench.data.datasheet import render_card, write_card
+    from bench.data.datasheet.source import card_sheet
+
+    sheet = card_sheet(args.target, args.scale, args.seed, SCENES_DIR)
+    print(render_card(sheet), end="")
+    if args.out:
+        out = Path(args.out)
+        check_writable(out.parent)
+        paths = write_card(sheet, out)
+        print(f"wrote {', '.join(str(p) for p in paths)}")
+    return 0
+
+
 def cmd_config(args: argparse.Namespace) -> int:
     """Print a method's config as a job would get it (YAML defaults <- scale preset <- ``--set``), checked
     against the method's typed config, one ``key: value  # type`` line per key."""
@@ -321,6 +339,14 @@ def build_parser() -> argparse.ArgumentParser:
     down.add_argument("--factor", type=int, required=True)
     down.add_argument("--overwrite", action="store_true")
     down.set_defaults(func=cmd_scenes_downsize)
+    card = scenes.add_parser("card", help="a scene's datasheet (prior errors by region, photometric content, capture) "
+                                          "beside real-data anchors, as markdown")
+    card.add_argument("target", metavar="RECIPE|DIR", help="recipe YAML path or scene name (synthesised in memory), "
+                                                             "or a dataset folder with GT depth and instances")
+    card.add_argument("--scale", default="small", choices=SCALES, help="recipe only")
+    card.add_argument("--seed", type=int, default=None, help="recipe only: override the recipe's seed")
+    card.add_argument("--out", default=None, metavar="FILE.md", help="also write the card there, and its plot as FILE.png")
+    card.set_defaults(func=cmd_scenes_card)
 
     run = sub.add_parser("run", help="run a table's jobs and write its CSV, markdown and plot")
     run.add_argument("--table", required=True, nargs="+", help="table name(s) from configs/tables/, a path to your own table spec (.yaml), or 'all'")

@@ -16,6 +16,7 @@ import trimesh
 
 from bench import __version__
 from bench.data.atomic import atomic_directory
+from bench.data.datasheet import CARD_NAME, compute_datasheet, write_card
 from bench.data.errors import BenchInputError
 from bench.data.scene import InstanceInfo, Scene
 from bench.data.synth.layouts import build_layout
@@ -97,6 +98,7 @@ def make_scene(
     }
     gt_mesh = cast(trimesh.Trimesh, trimesh.util.concatenate([o.mesh for o in layout.objects]))
     scene.validate()
+    scene.metadata["datasheet"] = compute_datasheet(scene, gt_mesh)  # measured properties (docs/datasheet.md)
     return scene, gt_mesh
 
 
@@ -128,6 +130,7 @@ def make_dataset(
     out_dir = Path(out_dir)
     with atomic_directory(out_dir, overwrite=overwrite) as tmp:
         write_scene(scene, tmp, recipe.format, gt_mesh=gt_mesh, **options)
+        write_card(scene.metadata["datasheet"], tmp / CARD_NAME)
     size = sum(p.stat().st_size for p in out_dir.rglob("*") if p.is_file())
     return {
         "path": str(out_dir),
