@@ -12,7 +12,8 @@ import yaml
 
 from bench.data.errors import BenchInputError
 from bench.data.synth import cameras as cams
-from bench.data.synth.geometry import SceneObject, _box
+from bench.data.synth.geometry import FURNITURE, SceneObject, _box
+from bench.data.synth.layouts import build_layout
 from bench.data.synth.make import make_dataset, make_scene
 from bench.data.synth.recipe import load_recipe, parse_recipe
 from bench.data.synth.render import SceneRaycaster
@@ -94,7 +95,26 @@ def test_room_cameras_are_outside_furniture():
     scene, mesh = make_scene(load_recipe(SCENES / "scannet_like_0.yaml"), scale="small")
     assert scene.num_views == 48 and (scene.width, scene.height) == (128, 96)
     assert scene.gt_depth[scene.gt_depth > 0].min() > 0.3  # nothing right in front of the lens
-    assert not scene.metadata["layout"]["objects_not_placed"]
+
+
+def test_room_furniture_is_placed_and_leaves_doors_clear():
+    """The plain (legacy) room places all its furniture; with decor, no furniture stands on the floor
+    in front of a door (what could not be placed elsewhere is recorded as not placed)."""
+    data = yaml.safe_load((SCENES / "scannet_like_0.yaml").read_text())
+    legacy = build_layout(parse_recipe({**data, "preset": "scannet-legacy"}, "legacy"), "small", np.random.default_rng([0, 0]))
+    assert not legacy.info["objects_not_placed"]
+    layout = build_layout(parse_recipe(data, "decor"), "small", np.random.default_rng([0, 0]), np.random.default_rng([0, 3]))
+    room = np.array(layout.info["room_size_m"][:2])
+    fronts = []
+    for door in (o.mesh.bounds[:, :2] for o in layout.objects if o.category == "door"):
+        front = door.copy()  # the door's width, 0.85 m into the room from its wall
+        ax = int(np.argmin(door[1] - door[0]))
+        front[:, ax] = [0.0, 0.85] if door[0, ax] < 1e-9 else [room[ax] - 0.85, room[ax]]
+        fronts.append(front)
+    assert fronts
+    for obj in (o for o in layout.objects if o.category in FURNITURE):
+        fp = obj.mesh.bounds[:, :2]
+        assert not any(np.all(fp[0] < f[1]) and np.all(f[0] < fp[1]) for f in fronts), f"{obj.name} blocks a door"
 
 
 def test_no_prior_error_effects_give_exact_priors(tmp_path):

@@ -19,6 +19,7 @@ import numpy as np
 import trimesh
 
 from bench.data.errors import BenchInputError
+from bench.data.synth.materials import Material
 
 BACKGROUND_CATEGORIES = ("wall", "floor", "ceiling", "ground")
 
@@ -36,6 +37,8 @@ class SceneObject:
         albedo: (3,) base RGB in [0, 1].
         texture: procedural texture name, see ``bench.data.synth.shading.TEXTURES`` ("none" = textureless).
         texture_scale: spatial period of the texture in metres.
+        material: albedo as a function of the world point (:mod:`bench.data.synth.materials`); when
+            set it replaces ``albedo`` x ``texture`` (room finishes and wall decor; None = legacy).
     """
 
     name: str
@@ -46,6 +49,7 @@ class SceneObject:
     albedo: np.ndarray
     texture: str = "none"
     texture_scale: float = 0.2
+    material: Material | None = None
 
 
 # ----------------------------------------------------------------------------- primitives

@@ -2,7 +2,10 @@
 
 * ``room`` (ScanNet-like / Replica-like presets): a closed room with furniture that has thin parts
   (chair and table legs, a lamp pole, plant stems, shelf boards) and big planar surfaces; cameras walk
-  a loop inside the room. Furniture is placed away from the camera path so no camera is inside an object.
+  a loop inside the room. Furniture is placed away from the camera path so no camera is inside an object,
+  and off the floor in front of doors. The room's look (finishes, wall decor, lights; preset ``look``,
+  recipe ``look:``) is :func:`bench.data.synth.look.dress_room`; the ``*-legacy`` presets are the plain
+  rooms of earlier versions (no decor, directional light), generated exactly as they were.
 * ``object`` (DTU-like): one object with thin parts on a ground plane; 3 sparse, little-overlap
   training views plus dense views used only to build the evaluation observation mask.
 * ``forward`` (LLFF-like): several objects at different depths in front of a back wall; about 20
@@ -29,9 +32,12 @@ from bench.data.synth.geometry import (
     load_user_mesh,
     place_on_floor,
 )
+from bench.data.synth.lighting import RoomLighting
+from bench.data.synth.look import dress_room
 from bench.data.synth.recipe import (
     ForwardCameras,
     ForwardSection,
+    LookSection,
     ObjectCameras,
     Recipe,
     RoomCameras,
@@ -40,6 +46,16 @@ from bench.data.synth.recipe import (
     resolve_mesh_path,
 )
 from bench.data.synth.shading import TEXTURES
+
+# Room looks (LookSection). Assumed values (docs/scenes.md): ScanNet rooms are plain (a door, a
+# whiteboard or a picture), painted walls, carpet, one or two ceiling lights; Replica rooms are
+# decorated (pictures, windows, wall shelves), wooden floors, more lights and daylight.
+SCANNET_LOOK = {"decor": "sparse", "wall_finish": "plaster", "floor_finish": "carpet", "lighting": "room", "plaster_amplitude": 0.03,
+                "ceiling_lights": 2, "light_radius": 0.15, "window_light": False, "window_intensity": 1.5, "ambient": 0.5,
+                "ao_distance": 0.4, "ao_samples": 12, "shadow_samples": 6}
+REPLICA_LOOK = {**SCANNET_LOOK, "decor": "rich", "floor_finish": "boards", "plaster_amplitude": 0.02, "ceiling_lights": 4,
+                "light_radius": 0.2, "window_light": True, "ambient": 0.4, "ao_distance": 0.5}
+LEGACY_LOOK = {**SCANNET_LOOK, "decor": "none", "wall_finish": "none", "floor_finish": "tiles", "lighting": "directional"}
 
 ROOM_PRESETS: dict[str, dict[str, Any]] = {
     # ScanNet: hand-held RGB-D sweeps of ordinary rooms; shaky trajectories.
@@ -50,6 +66,7 @@ ROOM_PRESETS: dict[str, dict[str, Any]] = {
         "hfov": 65.0,
         "views": {"tiny": 16, "small": 48, "medium": 96, "large": 200},
         "image": {"tiny": [64, 48], "small": [128, 96], "medium": [192, 144], "large": [384, 288]},
+        "look": SCANNET_LOOK,
     },
     # Replica: clean reconstructions of larger, fuller rooms; smooth synthetic trajectories.
     "replica": {
@@ -62,8 +79,12 @@ ROOM_PRESETS: dict[str, dict[str, Any]] = {
         "hfov": 70.0,
         "views": {"tiny": 16, "small": 64, "medium": 128, "large": 250},
         "image": {"tiny": [64, 48], "small": [128, 96], "medium": [192, 144], "large": [384, 288]},
+        "look": REPLICA_LOOK,
     },
 }
+# The plain rooms of earlier versions, reproduced exactly (no look draw, the legacy shading).
+ROOM_PRESETS["scannet-legacy"] = {**ROOM_PRESETS["scannet"], "look": LEGACY_LOOK}
+ROOM_PRESETS["replica-legacy"] = {**ROOM_PRESETS["replica"], "look": LEGACY_LOOK}
 
 
 @dataclass
@@ -76,6 +97,7 @@ class Layout:
         scale_mat: (4, 4) normalised -> world (maps the unit sphere onto the region of interest).
         splits: view index arrays by split name.
         info: layout facts recorded in the dataset metadata.
+        lighting: a room's lights, ambient occlusion and exposure (None: the legacy directional shading).
     """
 
     objects: list[SceneObject]
@@ -86,6 +108,7 @@ class Layout:
     scale_mat: np.ndarray
     splits: dict[str, np.ndarray] = field(default_factory=dict)
     info: dict[str, Any] = field(default_factory=dict)
+    lighting: RoomLighting | None = None
 
 
 def _sphere_scale_mat(centre: np.ndarray, radius: float) -> np.ndarray:
@@ -133,7 +156,9 @@ def _scene_object(name: str, category: str, mesh: trimesh.Trimesh, thin: bool, r
                        albedo=_jitter_colour(rng, base), texture=tex, texture_scale=float(rng.uniform(0.08, 0.2)))
 
 
-def build_room(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layout:
+def build_room(recipe: Recipe, scale: str, rng: np.random.Generator, look_rng: np.random.Generator | None = None) -> Layout:
+    """A room: geometry and cameras from ``rng``, its look (finishes, decor, lights) from ``look_rng``
+    (None: ``default_rng([recipe seed, 3])``)."""
     preset_name = recipe.raw.get("preset", recipe.format)
     if preset_name not in ROOM_PRESETS:
         raise BenchInputError(recipe.where("preset"), f"room preset must be one of {sorted(ROOM_PRESETS)}, got {preset_name!r}")
@@ -154,6 +179,10 @@ def build_room(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layout:
     clear = [np.array([p[:2, 3] - 0.25, p[:2, 3] + 0.25]) for p in poses]
 
     objects = build_room_shell(size, rng)
+    look = recipe.section(LookSection, "look", scale, defaults=preset["look"])
+    dressing = dress_room(objects, size, look, look_rng if look_rng is not None else np.random.default_rng([recipe.seed, 3]))
+    objects = dressing.objects
+    clear += dressing.keep_clear
     specs = _expand(recipe.raw.get("objects") or preset["objects"], recipe.where())
     counts: dict[str, int] = {}
     items = []
@@ -174,7 +203,8 @@ def build_room(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layout:
     radius = 0.5 * float(np.linalg.norm(size)) * 1.05
     return Layout(objects, K, poses, height, width, _sphere_scale_mat(centre, radius),
                   splits={"train": np.arange(n_views)},
-                  info={"preset": preset_name, "room_size_m": list(size), "objects_not_placed": dropped, "hfov_deg": hfov})
+                  info={"preset": preset_name, "room_size_m": list(size), "objects_not_placed": dropped, "hfov_deg": hfov, "look": dressing.info},
+                  lighting=dressing.lighting)
 
 
 def build_object(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layout:
@@ -280,6 +310,11 @@ def build_forward(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layou
 BUILDERS = {"room": build_room, "object": build_object, "forward": build_forward}
 
 
-def build_layout(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layout:
-    """Build the layout of ``recipe`` at ``scale`` from the geometry random stream ``rng``."""
+def build_layout(recipe: Recipe, scale: str, rng: np.random.Generator, look_rng: np.random.Generator | None = None) -> Layout:
+    """Build the layout of ``recipe`` at ``scale`` from the geometry random stream ``rng`` (a room's
+    look from ``look_rng``; only rooms have a look)."""
+    if recipe.kind == "room":
+        return build_room(recipe, scale, rng, look_rng)
+    if "look" in recipe.raw:
+        raise BenchInputError(recipe.where("look"), f"only room scenes have a look (this is a {recipe.kind!r} scene)")
     return BUILDERS[recipe.kind](recipe, scale, rng)

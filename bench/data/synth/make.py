@@ -1,7 +1,8 @@
 """Recipe -> rendered Scene -> effects -> dataset folder in a real on-disk format.
 
-Deterministic: the recipe seed (or an override) seeds two independent random streams, one for the
-geometry and cameras and one for the effects, so adding an effect never moves the furniture.
+Deterministic: the recipe seed (or an override) seeds independent random streams: geometry and
+cameras ``[seed, 0]``, effects ``[seed, 1]``, a room's look (finishes, decor, lights) ``[seed, 3]``;
+so adding an effect never moves the furniture, and decor or lights never move the cameras.
 The dataset folder is written into a temporary folder and renamed at the end (nothing half-written).
 """
 
@@ -48,11 +49,11 @@ def make_scene(
         raise BenchInputError("--seed", f"must be a non-negative integer, got {seed!r}")
     seed = recipe.seed if seed is None else seed
     geom_rng = np.random.default_rng([seed, 0])
-    layout = build_layout(recipe, scale, geom_rng)
+    layout = build_layout(recipe, scale, geom_rng, look_rng=np.random.default_rng([seed, 3]))
     if len(layout.poses) == 0:
         raise BenchInputError(recipe.where("cameras"), "recipe yields no cameras")
 
-    raycaster = SceneRaycaster(layout.objects, seed=seed)
+    raycaster = SceneRaycaster(layout.objects, seed=seed, lighting=layout.lighting)
     views = raycaster.render_all(layout.K, layout.poses, layout.height, layout.width)
 
     instances = {

@@ -29,8 +29,13 @@ of 2-5 m). Object (DTU-like) cameras: ``distance``, ``hfov``, ``train_azimuths``
 itself under ``forward:`` (``depth_range``, ``back_wall``, ``lateral_spread``, ``wall_texture``,
 ``wall_texture_scale``; :func:`bench.data.synth.layouts.build_forward`).
 
-The sections ``room:``, ``cameras:`` and ``forward:`` are typed (:class:`RoomSection`, :class:`RoomCameras`,
-:class:`ObjectCameras`, :class:`ForwardCameras`, :class:`ForwardSection`; read with
+A room's look (``look:``, :class:`LookSection`, over the preset's values): ``decor`` (none / sparse /
+rich), ``wall_finish``, ``floor_finish``, ``lighting`` (directional / room) and the amounts
+(``plaster_amplitude``, ``ceiling_lights``, ``light_radius``, ``window_light``, ``window_intensity``,
+``ambient``, ``ao_distance``, ``ao_samples``, ``shadow_samples``); docs/scenes.md.
+
+The sections ``room:``, ``cameras:``, ``look:`` and ``forward:`` are typed (:class:`RoomSection`, :class:`RoomCameras`,
+:class:`LookSection`, :class:`ObjectCameras`, :class:`ForwardCameras`, :class:`ForwardSection`; read with
 :meth:`Recipe.section`): an unknown key, a wrong type or a value out of range is one error naming the
 recipe file and the key (``bench.data.config``, the harness's one config mechanism).
 """
@@ -50,7 +55,8 @@ from bench.data.scene import DATASET_FORMATS, SCENE_KINDS
 
 SCALES = ("tiny", "small", "medium", "large")
 
-TOP_LEVEL_KEYS = {"name", "kind", "format", "seed", "preset", "description", "room", "objects", "object", "cameras", "image", "effects", "llff", "forward"}
+TOP_LEVEL_KEYS = {"name", "kind", "format", "seed", "preset", "description", "room", "objects", "object", "cameras", "image", "effects", "llff", "forward",
+                  "look"}
 OBJECT_TYPES = ("table", "chair", "lamp", "plant", "cabinet", "sofa", "shelf", "fern", "mesh")
 KIND_FORMATS = {"room": ("scannet", "replica"), "object": ("dtu",), "forward": ("llff",)}
 
@@ -68,6 +74,27 @@ class RoomSection:
 
     size: tuple[Annotated[float, Range(lo=1, lo_open=True)], Annotated[float, Range(lo=1, lo_open=True)],
                 Annotated[float, Range(lo=1, lo_open=True)]] | None = None
+
+
+@dataclass(frozen=True)
+class LookSection:
+    """``look:`` of a room recipe: finishes, wall decor and lighting (:mod:`bench.data.synth.look`).
+    Every key not in the recipe takes the room preset's value (``ROOM_PRESETS[...]["look"]`` in
+    :mod:`bench.data.synth.layouts`; the ``*-legacy`` presets give today's plain rooms)."""
+
+    decor: Literal["none", "sparse", "rich"]              # bench.data.synth.decor.DECOR_LEVELS
+    wall_finish: Literal["none", "plaster"]               # walls (and, at 1/3 amplitude, ceiling)
+    floor_finish: Literal["tiles", "boards", "carpet"]    # tiles = the legacy floor
+    lighting: Literal["directional", "room"]              # directional = legacy shading, no shadows
+    plaster_amplitude: Annotated[float, Range(lo=0, hi=0.3)]  # RMS relative albedo variation of plaster
+    ceiling_lights: Annotated[int, Range(lo=1, hi=16)]    # round ceiling lights on a grid
+    light_radius: Annotated[float, Range(lo=0, hi=0.5)]   # m, their emitting disc (0 = point lights)
+    window_light: bool                                    # each window is also an area light
+    window_intensity: Annotated[float, Range(lo=0, hi=50)]  # a window's on-axis intensity / a ceiling light's
+    ambient: Annotated[float, Range(lo=0, hi=5)]          # ambient / mean direct radiance over the room's faces
+    ao_distance: Metres                                   # ambient-occlusion reach, m (0 = none)
+    ao_samples: Annotated[int, Range(lo=0, hi=256)]       # hemisphere rays per point (0 = none)
+    shadow_samples: Annotated[int, Range(lo=1, hi=256)]   # shadow rays per area light and point
 
 
 @dataclass(frozen=True)
@@ -155,14 +182,16 @@ class Recipe:
             node = node[k]
         return resolve_scale(node, scale, self.where(*keys))
 
-    def section(self, cls: type[T], key: str, scale: str) -> T:
-        """The mapping at ``key`` as the typed section ``cls`` (per-scale values resolved first)."""
+    def section(self, cls: type[T], key: str, scale: str, defaults: dict[str, Any] | None = None) -> T:
+        """The mapping at ``key`` as the typed section ``cls`` (per-scale values resolved first), over
+        ``defaults`` (values for the keys the recipe does not give, e.g. a preset's)."""
         raw = self.raw.get(key)
         if raw is None:
             raw = {}
         if not isinstance(raw, dict):
             raise BenchInputError(self.where(key), f"must be a mapping, got {raw!r}")
-        return load_config(cls, {k: resolve_scale(v, scale, self.where(key, k)) for k, v in raw.items()}, self.where(key))
+        values = {k: resolve_scale(v, scale, self.where(key, k)) for k, v in raw.items()}
+        return load_config(cls, {**(defaults or {}), **values}, self.where(key))
 
     def where(self, *keys: str) -> str:
         base = str(self.path) if self.path else self.name

@@ -1,7 +1,9 @@
 """Ray casting of a set of :class:`SceneObject` with open3d's RaycastingScene.
 
-Produces, per view, RGB (procedural texture + Lambertian shading), z-depth, camera-frame normals and
-GT instance ids. Rays are built as ``R @ inv(K) @ [u, v, 1]`` (camera-frame z component 1), so the
+Produces, per view, RGB (albedo from each object's material or texture, then Lambertian shading: the
+legacy directional light of :func:`bench.data.synth.shading.shade`, or a room's lights with shadows
+and ambient occlusion, :class:`bench.data.synth.lighting.RoomLighting`), z-depth, camera-frame normals
+and GT instance ids. Rays are built as ``R @ inv(K) @ [u, v, 1]`` (camera-frame z component 1), so the
 hit distance open3d returns is the z-depth directly.
 """
 
@@ -13,6 +15,7 @@ import numpy as np
 import open3d as o3d
 
 from bench.data.synth.geometry import SceneObject
+from bench.data.synth.lighting import RoomLighting
 from bench.data.synth.shading import shade, texture_factor
 from metrics.camera import pixel_rays
 
@@ -35,10 +38,14 @@ class RenderedViews:
 
 
 class SceneRaycaster:
-    """Holds an open3d RaycastingScene for a list of objects; renders views on demand."""
+    """Holds an open3d RaycastingScene for a list of objects; renders views on demand.
 
-    def __init__(self, objects: list[SceneObject], seed: int = 0) -> None:
+    ``lighting``: the room's lights (None: the legacy directional shading, no shadows). The scene it
+    casts shadow and ambient-occlusion rays against is this one (every object, decor included)."""
+
+    def __init__(self, objects: list[SceneObject], seed: int = 0, lighting: RoomLighting | None = None) -> None:
         self.objects = objects
+        self.lighting = lighting
         self.scene = o3d.t.geometry.RaycastingScene()
         self._geom_to_instance: dict[int, int] = {}
         for idx, obj in enumerate(objects):
@@ -85,13 +92,16 @@ class SceneRaycaster:
 
         rgb = np.zeros((len(rays), 3))
         pts = t + dirs_world * depth[:, None]
+        albedo = np.zeros((len(rays), 3))
         for idx, obj in enumerate(self.objects):
             sel = instance == idx + 1
             if not np.any(sel):
                 continue
-            tex = texture_factor(obj.texture, pts[sel], obj.texture_scale, self._phases[idx])
-            albedo = np.clip(obj.albedo[None, :] * tex[:, None], 0.0, 1.0)
-            rgb[sel] = shade(albedo, n_world[sel])
+            albedo[sel] = self.albedo(idx, pts[sel])
+            if self.lighting is None:
+                rgb[sel] = shade(albedo[sel], n_world[sel])
+        if self.lighting is not None and np.any(hit):
+            rgb[hit] = self.lighting.shade(self.scene, pts[hit], n_world[hit], albedo[hit])
         n_cam = n_world @ R  # world -> camera: R^T n, written as row-vector product
         return (
             rgb.reshape(height, width, 3).astype(np.float32),
@@ -99,6 +109,15 @@ class SceneRaycaster:
             n_cam.reshape(height, width, 3).astype(np.float32),
             instance.reshape(height, width),
         )
+
+    def albedo(self, idx: int, points: np.ndarray) -> np.ndarray:
+        """(M, 3) albedo in [0, 1] of object ``idx`` at (M, 3) world points on it: its material, else
+        its base colour times its texture (with the object's phase)."""
+        obj = self.objects[idx]
+        if obj.material is not None:
+            return obj.material.albedo(points)
+        tex = texture_factor(obj.texture, points, obj.texture_scale, self._phases[idx])
+        return np.clip(obj.albedo[None, :] * tex[:, None], 0.0, 1.0)
 
     def render_all(self, K: np.ndarray, poses: np.ndarray, height: int, width: int) -> RenderedViews:
         """Render N views: K (N, 3, 3), poses (N, 4, 4)."""
