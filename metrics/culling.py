@@ -11,7 +11,8 @@ Steps:
   face is removed when all three of its vertices lie outside every camera frustum (behind the camera
   or projecting outside the image).
 * :func:`points_visible`: frustum test plus an occlusion test against depth maps rendered at the poses
-  (a point counts as seen if ``z <= depth(pixel) + tol`` in at least one view).
+  (a point counts as seen if ``z <= depth(pixel) + tol`` in at least one view); :func:`views_seeing`
+  gives the same test per view (how many views see each point).
   :func:`cull_mesh_to_visible` applies it to faces (kept if any vertex is seen).
 * :func:`subdivide_mesh`: split long edges first: vertex-based culling is only meaningful when faces
   are small compared to the frusta (marching-cubes meshes are; synthetic GT walls of two triangles
@@ -85,6 +86,22 @@ def points_in_frusta(points: Any, K: Any, cam_to_world: Any, H: int, W: int) -> 
     return out
 
 
+def _seen(points: Any, K: Any, cam_to_world: Any, H: int, W: int, depth_maps: Any, tol: float):
+    """Yield (slice, seen) per chunk of points: seen (N, p) bool, view n sees the point (see :func:`points_visible`)."""
+    p = as_points(points, "points", allow_empty=True)
+    Km, c2w, h, w = as_cameras(K, cam_to_world, H, W)
+    d = np.asarray(to_numpy(depth_maps, "depth_maps"), dtype=np.float64)
+    if d.shape != (c2w.shape[0], h, w):
+        raise ValueError(f"depth_maps must have shape {(c2w.shape[0], h, w)}, got {tuple(d.shape)}")
+    tol = check_positive(tol, "tol", allow_zero=True)
+    for sl, u, v, z in _project(p, Km, c2w):
+        inside = (z > 0) & (u >= -0.5) & (u <= w - 0.5) & (v >= -0.5) & (v <= h - 0.5)
+        ui = np.clip(np.rint(u), 0, w - 1).astype(np.int64)
+        vi = np.clip(np.rint(v), 0, h - 1).astype(np.int64)
+        dd = d[np.arange(d.shape[0])[:, None], vi, ui]  # [N, p]
+        yield sl, inside & ((dd <= 0) | (z <= dd + tol))
+
+
 def points_visible(
     points: Any,
     K: Any,
@@ -108,20 +125,22 @@ def points_visible(
     Returns:
         (P,) bool.
     """
-    p = as_points(points, "points", allow_empty=True)
-    Km, c2w, h, w = as_cameras(K, cam_to_world, H, W)
-    d = np.asarray(to_numpy(depth_maps, "depth_maps"), dtype=np.float64)
-    if d.shape != (c2w.shape[0], h, w):
-        raise ValueError(f"depth_maps must have shape {(c2w.shape[0], h, w)}, got {tuple(d.shape)}")
-    tol = check_positive(tol, "tol", allow_zero=True)
-    out = np.zeros(p.shape[0], dtype=bool)
-    for sl, u, v, z in _project(p, Km, c2w):
-        inside = (z > 0) & (u >= -0.5) & (u <= w - 0.5) & (v >= -0.5) & (v <= h - 0.5)
-        ui = np.clip(np.rint(u), 0, w - 1).astype(np.int64)
-        vi = np.clip(np.rint(v), 0, h - 1).astype(np.int64)
-        dd = d[np.arange(d.shape[0])[:, None], vi, ui]  # [N, p]
-        seen = inside & ((dd <= 0) | (z <= dd + tol))
+    out = np.zeros(as_points(points, "points", allow_empty=True).shape[0], dtype=bool)
+    for sl, seen in _seen(points, K, cam_to_world, H, W, depth_maps, tol):
         out[sl] = seen.any(0)
+    return out
+
+
+def views_seeing(points: Any, K: Any, cam_to_world: Any, H: int, W: int, depth_maps: Any, tol: float = 0.02) -> np.ndarray:
+    """Which views see which points (the test of :func:`points_visible`, per view).
+
+    Returns:
+        (N, P) bool: view n sees point p.
+    """
+    cams = np.asarray(to_numpy(cam_to_world, "cam_to_world"))
+    out = np.zeros((1 if cams.ndim == 2 else cams.shape[0], as_points(points, "points", allow_empty=True).shape[0]), dtype=bool)
+    for sl, seen in _seen(points, K, cam_to_world, H, W, depth_maps, tol):
+        out[:, sl] = seen
     return out
 
 

@@ -20,6 +20,21 @@ def test_frustum_test_and_depth_rendering_are_z_depth():
     np.testing.assert_allclose(d, 3.0, rtol=1e-6)  # a fronto-parallel plane has constant z-depth
 
 
+def test_views_seeing_counts_each_view_in_frame_and_in_front_of_its_depth():
+    """Two cameras 1 m apart looking along +z at a wall at z = 3: a point on the wall in both frames is
+    seen by both, one behind the wall by none, one beside the first camera's frame only by the second."""
+    from metrics.culling import points_visible, views_seeing
+
+    K = np.array([[50.0, 0, 31.5], [0, 50.0, 23.5], [0, 0, 1]])
+    c2w = np.stack([np.eye(4), np.eye(4)])
+    c2w[1, 0, 3] = 1.0
+    depth = np.full((2, 48, 64), 3.0)
+    pts = np.array([[0.5, 0.0, 3.0], [0.5, 0.0, 3.5], [2.9, 0.0, 3.0]])
+    seen = views_seeing(pts, K, c2w, 48, 64, depth, tol=0.02)
+    assert seen.tolist() == [[True, False, False], [True, False, True]]
+    np.testing.assert_array_equal(points_visible(pts, K, c2w, 48, 64, depth, tol=0.02), seen.any(0))
+
+
 def test_cull_and_crop(ring_cameras):
     K, c2w, H, W = ring_cameras
     box = trimesh.creation.box((0.5, 0.5, 0.5))

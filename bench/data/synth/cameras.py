@@ -1,4 +1,5 @@
-"""Camera placement: look-at poses (OpenCV axes) and the paths of the three scene kinds.
+"""Camera placement: look-at poses (OpenCV axes) and the paths of the three scene kinds (a room has two:
+the hand-held walk around the room, :func:`room_walk`, and the loop in its middle, :func:`room_path`).
 
 All poses are (4, 4) float64 camera-to-world matrices, OpenCV axes (x right, y down, z forward),
 world z up, metres.
@@ -6,8 +7,12 @@ world z up, metres.
 
 from __future__ import annotations
 
-import numpy as np
+from typing import Sequence
 
+import numpy as np
+from scipy.ndimage import gaussian_filter1d
+
+from bench.data.synth.floorplan import Footprint, clearance
 from metrics.camera import look_at
 
 
@@ -46,6 +51,131 @@ def room_path(
         tgt_xy = centre + np.array([0.35 * sx * np.cos(look_a), 0.35 * sy * np.sin(look_a)]) + rng.normal(0, jitter, 2)
         target = np.array([*tgt_xy, rng.uniform(0.5, 1.0)])
         poses.append(look_at(eye, target))
+    return np.stack(poses)
+
+
+# Aim points of a room walk (assumed: a person scanning a room aims at the furniture in the middle,
+# the table top and the seats, and at the walls a little below eye height, a few metres away).
+WALK_FOCUS_HEIGHT = 0.6    # m: the table group is looked at around this height
+WALK_WALL_HEIGHT = 1.0     # m: the walls and the pieces along them around this height ...
+WALK_WALL_DISTANCE = 2.5   # m: ... this far away (sets the slight downward pitch of those views)
+
+
+def walk_loop(
+    size: Sequence[float],
+    obstacles: Sequence[Footprint] = (),
+    around: Footprint | None = None,
+    min_clearance: float = 0.3,
+    n_rays: int = 360,
+    step: float = 0.01,
+) -> np.ndarray:
+    """The closed floor path of a walk through the room ``[0, sx] x [0, sy]``: around the rectangle
+    ``around`` (the table group; None = the middle of the room), midway between it and what stands along
+    the walls, smoothed, never closer than ``min_clearance`` metres to an obstacle or a wall.
+
+    On each of ``n_rays`` rays from the centre of ``around`` the walkable stretch beyond it is found
+    (``step`` metres resolution); the path runs through the middle of those stretches, smoothed over
+    about 10 degrees and kept inside them.
+
+    Returns:
+        (n_rays, 2) world x, y of the closed path, counter-clockwise.
+
+    Raises:
+        ValueError: some ray finds no walkable stretch (the room is too full for a walk around it).
+    """
+    sx, sy = float(size[0]), float(size[1])
+    focus = around.centre if around is not None else np.array([sx / 2, sy / 2])
+    theta = np.linspace(0.0, 2 * np.pi, n_rays, endpoint=False)
+    dirs = np.stack([np.cos(theta), np.sin(theta)], axis=1)
+    r = np.arange(0.0, float(np.hypot(sx, sy)), step)
+    pts = (focus[None, None, :] + r[None, :, None] * dirs[:, None, :]).reshape(-1, 2)
+    free = (clearance(pts, size, obstacles) >= min_clearance).reshape(n_rays, len(r))
+    if around is not None:
+        start = np.argmax((around.distance(pts) >= min_clearance).reshape(n_rays, len(r)), axis=1)
+    else:  # no group in the middle: walk no nearer to the centre than 40 % of the way to the walls
+        with np.errstate(divide="ignore"):
+            to_wall = np.min(np.where(dirs > 0, (np.array([sx, sy]) - focus) / dirs, np.where(dirs < 0, -focus / dirs, np.inf)), axis=1)
+        start = np.searchsorted(r, 0.4 * to_wall)
+    inner, outer = np.zeros(n_rays), np.zeros(n_rays)
+    for k in range(n_rays):
+        walkable = np.flatnonzero(free[k, start[k]:])
+        if walkable.size == 0 and around is None:  # a cramped room: the first walkable floor out from the centre
+            start[k] = 0
+            walkable = np.flatnonzero(free[k])
+        if walkable.size == 0:
+            raise ValueError(f"no walkable floor at {np.degrees(theta[k]):.0f} deg from the room's centre with {min_clearance:g} m clearance")
+        a = start[k] + walkable[0]
+        blocked = np.flatnonzero(~free[k, a:])
+        b = a + (blocked[0] if blocked.size else len(r) - a)
+        inner[k], outer[k] = r[a], r[b - 1]
+    radius = (inner + outer) / 2
+    for _ in range(3):
+        radius = np.clip(gaussian_filter1d(radius, sigma=n_rays / 36, mode="wrap"), inner, outer)
+    return focus + radius[:, None] * dirs
+
+
+def room_walk(
+    size: Sequence[float],
+    n_views: int,
+    rng: np.random.Generator,
+    obstacles: Sequence[Footprint] = (),
+    around: Footprint | None = None,
+    min_clearance: float = 0.3,
+    height_range: tuple[float, float] = (1.2, 1.7),
+    jitter: float = 0.05,
+    shake_deg: float = 2.0,
+    sweeps: int = 4,
+    sweep_deg: float = 100.0,
+) -> np.ndarray:
+    """A hand-held scan of a room: one walk around :func:`walk_loop`'s path, frames in capture order.
+
+    The operator walks the loop at a steady pace (``n_views`` frames equally spaced along it, a random
+    start and direction) and turns the camera back and forth between the table group in the middle
+    (heading towards ``around``'s centre) and the walls, corners and the pieces along them: the heading is
+    the direction to the centre plus ``sweep_deg * sin(2 pi sweeps t + phase)`` (t the fraction of the
+    loop walked), so it turns smoothly, ``sweeps`` times per loop. Pitch looks down at the group
+    (:data:`WALK_FOCUS_HEIGHT`) when facing it and slightly down at the walls otherwise; the height
+    wanders smoothly within ``height_range`` (m). A shaky hand adds Gaussian position noise of std
+    ``jitter`` metres (horizontal; half of it vertical; dropped where it would break ``min_clearance``)
+    and roll / pitch / heading noise of std ``shake_deg`` degrees (0 and 0: a smooth synthetic walk).
+
+    Returns:
+        (n_views, 4, 4) camera-to-world poses (OpenCV axes, world z up, metres).
+
+    Raises:
+        ValueError: no walkable loop (see :func:`walk_loop`).
+    """
+    loop = walk_loop(size, obstacles, around, min_clearance)
+    focus = around.centre if around is not None else np.array([size[0] / 2, size[1] / 2])
+    closed = np.concatenate([loop, loop[:1]])
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(closed, axis=0), axis=1))])
+    start, direction = rng.uniform(0.0, 1.0), rng.choice([-1.0, 1.0])
+    sweep_phase, height_phase, height_cycles = rng.uniform(0, 2 * np.pi), rng.uniform(0, 2 * np.pi), rng.uniform(1.0, 3.0)
+    t = np.arange(n_views) / n_views
+    s = ((start + direction * t) % 1.0) * arc[-1]
+    xy = np.stack([np.interp(s, arc, closed[:, 0]), np.interp(s, arc, closed[:, 1])], axis=1)
+    wobble = rng.normal(0.0, 1.0, (n_views, 3)) * jitter * np.array([1.0, 1.0, 0.5])
+    noise = np.deg2rad(rng.normal(0.0, 1.0, (n_views, 3)) * shake_deg)  # heading, pitch, roll
+    steady = clearance(xy + wobble[:, :2], size, obstacles) >= min_clearance
+    xy = np.where(steady[:, None], xy + wobble[:, :2], xy)
+    lo, hi = height_range
+    z = np.clip((lo + hi) / 2 + 0.45 * (hi - lo) * np.sin(2 * np.pi * height_cycles * t + height_phase) + wobble[:, 2], lo, hi)
+
+    to_focus = focus - xy
+    sweep = np.deg2rad(sweep_deg) * np.sin(2 * np.pi * sweeps * t + sweep_phase)
+    heading = np.arctan2(to_focus[:, 1], to_focus[:, 0]) + sweep + noise[:, 0]
+    facing = np.maximum(np.cos(sweep), 0.0)
+    pitch_focus = -np.arctan2(z - WALK_FOCUS_HEIGHT, np.linalg.norm(to_focus, axis=1))
+    pitch_wall = -np.arctan2(z - WALK_WALL_HEIGHT, WALK_WALL_DISTANCE)
+    pitch = facing * pitch_focus + (1 - facing) * pitch_wall + noise[:, 1]
+    poses = []
+    for i in range(n_views):
+        eye = np.array([xy[i, 0], xy[i, 1], z[i]])
+        forward = np.array([np.cos(pitch[i]) * np.cos(heading[i]), np.cos(pitch[i]) * np.sin(heading[i]), np.sin(pitch[i])])
+        pose = look_at(eye, eye + forward)
+        c, s_ = np.cos(noise[i, 2]), np.sin(noise[i, 2])
+        pose[:3, :3] = pose[:3, :3] @ np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])  # roll about the optical axis
+        poses.append(pose)
     return np.stack(poses)
 
 

@@ -23,6 +23,7 @@ eye height ~1.5 m, whiteboard bottom edge ~0.9 m).
 from __future__ import annotations
 
 import colorsys
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -35,6 +36,7 @@ from bench.data.synth.materials import Artwork, Material, Parts, Textured
 EDGE_MARGIN = 0.12   # m: items keep this far from the ends of their wall
 GAP = 0.05           # m: between two items' rectangles on a wall
 TRIES = 60           # random positions tried per item before it is dropped
+AGAINST_WALL = 0.3  # m: furniture this close to a wall takes its span of the wall (nothing hangs behind it, below its top)
 DOOR_CLEARANCE = 0.85  # m: the floor in front of a door (its leaf, 0.8-0.9 m, swings over it) is kept clear
 PAINT_WHITE = np.array([0.90, 0.89, 0.86])
 METAL = np.array([0.62, 0.62, 0.64])
@@ -325,9 +327,12 @@ def _skirting(wall: Wall, index: int, height: float, cuts: list[tuple[float, flo
                        albedo=np.asarray(colour.albedo(mesh.vertices[:1])[0]), material=colour)
 
 
-def _place(item: _Item, walls: list[Wall], rects: list[list[tuple[float, ...]]], rng: np.random.Generator) -> tuple[int, float] | None:
+def _place(item: _Item, walls: list[Wall], rects: list[list[tuple[float, ...]]], rng: np.random.Generator,
+           door_taken: list[list[tuple[float, ...]]] | None = None) -> tuple[int, float] | None:
     """A free (wall index, u centre) for ``item`` (recorded in ``rects``), or None after ``TRIES``
-    tries. Doors sit near a corner (their casing 12-40 cm from the wall's end) and cut the skirting."""
+    tries. Doors sit near a corner (their casing 12-40 cm from the wall's end) or, in a third of the
+    tries, anywhere along the wall; they cut the skirting and also avoid ``door_taken`` (per wall, the
+    spans of furniture standing on the floor in front of them)."""
     rel = item.rect
     margin = EDGE_MARGIN + (item.clear_depth if item.kind == "wall_shelf" else 0.0)
     for _ in range(TRIES):
@@ -337,9 +342,11 @@ def _place(item: _Item, walls: list[Wall], rects: list[list[tuple[float, ...]]],
             continue
         uc = float(rng.uniform(lo, hi))
         if item.kind == "door":
-            uc = float(lo + rng.uniform(0.0, 0.28)) if rng.random() < 0.5 else float(hi - rng.uniform(0.0, 0.28))
+            where = rng.random()
+            if where < 2 / 3:
+                uc = float(lo + rng.uniform(0.0, 0.28)) if where < 1 / 3 else float(hi - rng.uniform(0.0, 0.28))
         r = (uc + rel[0], uc + rel[1], rel[2], rel[3])
-        if _free(rects[wi][1:] if item.kind == "door" else rects[wi], r):
+        if _free(rects[wi][1:] + (door_taken[wi] if door_taken else []) if item.kind == "door" else rects[wi], r):
             rects[wi].append(r)
             return wi, uc
     return None
@@ -358,9 +365,28 @@ def _switch_beside(door: _Item, wi: int, uc: float, walls: list[Wall], rects: li
     return None
 
 
-def build_decor(size: tuple[float, float, float], level: str, rng: np.random.Generator) -> Decor:
+def furniture_rects(walls: list[Wall], obstacles: Sequence[np.ndarray], reach: float) -> list[list[tuple[float, ...]]]:
+    """Per wall, the (u0, u1, z0, z1) rectangles taken by furniture: each obstacle box ((2, 3) world
+    min / max) that comes within ``reach`` metres of the wall covers its extent along the wall, from the
+    floor to its top (a picture may hang above a sofa; a door may not open onto a table)."""
+    rects: list[list[tuple[float, ...]]] = [[] for _ in walls]
+    for box in obstacles:
+        corners = np.array([[x, y] for x in box[:, 0] for y in box[:, 1]])
+        for wi, wall in enumerate(walls):
+            rel = corners - wall.origin[:2]
+            depth = rel @ wall.normal[:2]
+            if float(depth.min()) < reach:
+                u = rel @ wall.u_axis[:2]
+                rects[wi].append((float(u.min()), float(u.max()), 0.0, float(box[1, 2])))
+    return rects
+
+
+def build_decor(size: tuple[float, float, float], level: str, rng: np.random.Generator, obstacles: Sequence[np.ndarray] = ()) -> Decor:
     """The decor of the box room of ``size`` (sx, sy, sz) m at ``level`` (``"none"`` or a key of
-    ``DECOR_LEVELS``), drawn from ``rng`` (nothing is drawn for ``"none"``).
+    ``DECOR_LEVELS``), drawn from ``rng`` (nothing is drawn for ``"none"``). ``obstacles``: (2, 3) world
+    boxes of the furniture standing in the room (:func:`furniture_rects`): decor avoids the wall spans
+    taken by furniture against the wall (within ``AGAINST_WALL``), doors also those of furniture on the
+    floor in front of them (within ``DOOR_CLEARANCE``).
 
     Items are placed in the order door (with its light switch beside it), windows, whiteboard, wall
     shelves, pictures, sockets (larger first), each at a random wall and position that is free
@@ -377,13 +403,16 @@ def build_decor(size: tuple[float, float, float], level: str, rng: np.random.Gen
     makers = {"door": _door, "window": _window, "whiteboard": _whiteboard, "wall_shelf": _wall_shelf, "picture": _picture,
               "socket": lambda r, z: _plate("socket", 0.3)}
     skirting_h = float(rng.uniform(0.07, 0.12))
-    rects: list[list[tuple[float, ...]]] = [[(0.0, w.length, 0.0, skirting_h)] for w in walls]  # the skirting band
+    taken = furniture_rects(walls, obstacles, AGAINST_WALL)
+    door_taken = furniture_rects(walls, obstacles, DOOR_CLEARANCE)
+    # the skirting band first (a door ignores it: rects[wi][1:]), then the furniture's spans
+    rects: list[list[tuple[float, ...]]] = [[(0.0, w.length, 0.0, skirting_h), *taken[wi]] for wi, w in enumerate(walls)]
     placed: list[tuple[_Item, int, float]] = []
     dropped: dict[str, int] = {}
     for kind, n in counts.items():
         for _ in range(n):
             item = makers[kind](rng, sz)
-            at = _place(item, walls, rects, rng)
+            at = _place(item, walls, rects, rng, door_taken)
             if at is None:
                 dropped[kind] = dropped.get(kind, 0) + 1
                 continue

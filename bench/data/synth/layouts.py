@@ -1,11 +1,13 @@
 """Scene layouts: objects + cameras + image size for the three scene kinds.
 
 * ``room`` (ScanNet-like / Replica-like presets): a closed room with furniture that has thin parts
-  (chair and table legs, a lamp pole, plant stems, shelf boards) and big planar surfaces; cameras walk
-  a loop inside the room. Furniture is placed away from the camera path so no camera is inside an object,
-  and off the floor in front of doors. The room's look (finishes, wall decor, lights; preset ``look``,
-  recipe ``look:``) is :func:`bench.data.synth.look.dress_room`; the ``*-legacy`` presets are the plain
-  rooms of earlier versions (no decor, directional light), generated exactly as they were.
+  (chair and table legs, a lamp pole, plant stems, shelf boards) and big planar surfaces. The furniture
+  stands as rooms have it (against the walls, a table with chairs in the free floor) and the cameras walk
+  around the room; no camera is inside or next to an object. The room's look (finishes, wall decor on the
+  wall spans the furniture leaves free, lights; preset ``look``, recipe ``look:``) is
+  :func:`bench.data.synth.look.dress_room`. The ``-legacy`` presets are the plain rooms of earlier versions
+  (furniture at random spots away from a small camera loop in the middle, no decor, one directional
+  light), generated exactly as they were.
 * ``object`` (DTU-like): one object with thin parts on a ground plane; 3 sparse, little-overlap
   training views plus dense views used only to build the evaluation observation mask.
 * ``forward`` (LLFF-like): several objects at different depths in front of a back wall; about 20
@@ -22,6 +24,8 @@ import trimesh
 
 from bench.data.errors import BenchInputError
 from bench.data.synth import cameras as cams
+from bench.data.synth.floorplan import Footprint
+from bench.data.synth.furnish import arrange_walls_and_table
 from bench.data.synth.geometry import (
     FURNITURE,
     PALETTE,
@@ -35,6 +39,7 @@ from bench.data.synth.geometry import (
 from bench.data.synth.lighting import RoomLighting
 from bench.data.synth.look import dress_room
 from bench.data.synth.recipe import (
+    ROOM_CAMERA_KEYS_OF_PATH,
     ForwardCameras,
     ForwardSection,
     LookSection,
@@ -57,34 +62,50 @@ REPLICA_LOOK = {**SCANNET_LOOK, "decor": "rich", "floor_finish": "boards", "plas
                 "light_radius": 0.2, "window_light": True, "ambient": 0.4, "ao_distance": 0.5}
 LEGACY_LOOK = {**SCANNET_LOOK, "decor": "none", "wall_finish": "none", "floor_finish": "tiles", "lighting": "directional"}
 
-ROOM_PRESETS: dict[str, dict[str, Any]] = {
-    # ScanNet: hand-held RGB-D sweeps of ordinary rooms; shaky trajectories.
-    "scannet": {
-        "size": [4.2, 3.6, 2.6],
-        "objects": [{"type": "table"}, {"type": "chair", "count": 3}, {"type": "lamp"}, {"type": "plant"}, {"type": "cabinet"}, {"type": "sofa"}],
-        "jitter": 0.15,
-        "hfov": 65.0,
-        "views": {"tiny": 16, "small": 48, "medium": 96, "large": 200},
-        "image": {"tiny": [64, 48], "small": [128, 96], "medium": [192, 144], "large": [384, 288]},
-        "look": SCANNET_LOOK,
-    },
-    # Replica: clean reconstructions of larger, fuller rooms; smooth synthetic trajectories.
-    "replica": {
-        "size": [5.0, 4.2, 2.8],
-        "objects": [
-            {"type": "table"}, {"type": "chair", "count": 4}, {"type": "lamp", "count": 2}, {"type": "plant", "count": 2},
-            {"type": "shelf"}, {"type": "sofa"}, {"type": "cabinet"},
-        ],
-        "jitter": 0.05,
-        "hfov": 70.0,
-        "views": {"tiny": 16, "small": 64, "medium": 128, "large": 250},
-        "image": {"tiny": [64, 48], "small": [128, 96], "medium": [192, 144], "large": [384, 288]},
-        "look": REPLICA_LOOK,
-    },
+# The room presets as scenes were first generated: a loop in the middle of the room, furniture at random
+# free spots ("-legacy" presets; their scenes stay byte-identical).
+_FIRST_ROOMS: dict[str, Any] = {
+    "arrangement": "scatter",
+    "path": "loop",
+    "image": {"tiny": [64, 48], "small": [128, 96], "medium": [192, 144], "large": [384, 288]},
+    "look": LEGACY_LOOK,
 }
-# The plain rooms of earlier versions, reproduced exactly (no look draw, the legacy shading).
-ROOM_PRESETS["scannet-legacy"] = {**ROOM_PRESETS["scannet"], "look": LEGACY_LOOK}
-ROOM_PRESETS["replica-legacy"] = {**ROOM_PRESETS["replica"], "look": LEGACY_LOOK}
+_SCANNET_LOOP: dict[str, Any] = {
+    **_FIRST_ROOMS,
+    "size": [4.2, 3.6, 2.6],
+    "objects": [{"type": "table"}, {"type": "chair", "count": 3}, {"type": "lamp"}, {"type": "plant"}, {"type": "cabinet"}, {"type": "sofa"}],
+    "jitter": 0.15,
+    "hfov": 65.0,
+    "views": {"tiny": 16, "small": 48, "medium": 96, "large": 200},
+}
+_REPLICA_LOOP: dict[str, Any] = {
+    **_FIRST_ROOMS,
+    "size": [5.0, 4.2, 2.8],
+    "objects": [
+        {"type": "table"}, {"type": "chair", "count": 4}, {"type": "lamp", "count": 2}, {"type": "plant", "count": 2},
+        {"type": "shelf"}, {"type": "sofa"}, {"type": "cabinet"},
+    ],
+    "jitter": 0.05,
+    "hfov": 70.0,
+    "views": {"tiny": 16, "small": 64, "medium": 128, "large": 250},
+}
+
+# Room sizes of the walking presets (assumed): the smallest rooms that hold the preset's furniture along
+# the walls and the table group with a walkway of 2 x 0.3 m around it at the -10 % size draw (the loop
+# presets' 4.2 x 3.6 m and 5.0 x 4.2 m rooms do not: sofa 0.8-0.95 m deep + table group ~1.6 m + two
+# walkways exceed 3.6 m). docs/scenes.md.
+ROOM_PRESETS: dict[str, dict[str, Any]] = {
+    # ScanNet: hand-held RGB-D sweeps of ordinary rooms: a shaky walk around the room, turning between the
+    # furniture in the middle and the walls. Hand shake (assumed, no published figure): 5 cm position
+    # noise, 2 deg roll / pitch / heading noise between the frames kept.
+    "scannet": {**_SCANNET_LOOP, "size": [4.6, 4.3, 2.6], "arrangement": "walls_and_table", "path": "walk",
+                "jitter": 0.05, "shake": 2.0, "look": SCANNET_LOOK},
+    # Replica: clean reconstructions of larger, fuller rooms; smooth synthetic walks (no shake).
+    "replica": {**_REPLICA_LOOP, "size": [5.4, 4.4, 2.8], "arrangement": "walls_and_table", "path": "walk",
+                "jitter": 0.0, "shake": 0.0, "look": REPLICA_LOOK},
+    "scannet-legacy": _SCANNET_LOOP,
+    "replica-legacy": _REPLICA_LOOP,
+}
 
 
 @dataclass
@@ -156,33 +177,8 @@ def _scene_object(name: str, category: str, mesh: trimesh.Trimesh, thin: bool, r
                        albedo=_jitter_colour(rng, base), texture=tex, texture_scale=float(rng.uniform(0.08, 0.2)))
 
 
-def build_room(recipe: Recipe, scale: str, rng: np.random.Generator, look_rng: np.random.Generator | None = None) -> Layout:
-    """A room: geometry and cameras from ``rng``, its look (finishes, decor, lights) from ``look_rng``
-    (None: ``default_rng([recipe seed, 3])``)."""
-    preset_name = recipe.raw.get("preset", recipe.format)
-    if preset_name not in ROOM_PRESETS:
-        raise BenchInputError(recipe.where("preset"), f"room preset must be one of {sorted(ROOM_PRESETS)}, got {preset_name!r}")
-    preset = ROOM_PRESETS[preset_name]
-    room = recipe.section(RoomSection, "room", scale)
-    camera = recipe.section(RoomCameras, "cameras", scale)
-    size: tuple[float, float, float] = room.size if room.size is not None else \
-        cast(tuple[float, float, float], tuple(float(s * rng.uniform(0.9, 1.1)) for s in preset["size"]))
-    n_views = camera.views if camera.views is not None else int(preset["views"][scale])
-    width, height = _image_size(recipe, scale, preset["image"])
-    jitter = camera.jitter if camera.jitter is not None else float(preset["jitter"])
-    hfov = camera.hfov if camera.hfov is not None else float(preset["hfov"])
-    height_range = camera.height
-    if not height_range[1] < size[2]:
-        raise BenchInputError(recipe.where("cameras", "height"), f"need low <= high < the room height {size[2]:g} m, got {list(height_range)}")
-
-    poses = cams.room_path(size, n_views, rng, height_range=height_range, jitter=jitter, radius_frac=camera.loop_radius)
-    clear = [np.array([p[:2, 3] - 0.25, p[:2, 3] + 0.25]) for p in poses]
-
-    objects = build_room_shell(size, rng)
-    look = recipe.section(LookSection, "look", scale, defaults=preset["look"])
-    dressing = dress_room(objects, size, look, look_rng if look_rng is not None else np.random.default_rng([recipe.seed, 3]))
-    objects = dressing.objects
-    clear += dressing.keep_clear
+def _room_items(recipe: Recipe, preset: dict[str, Any], rng: np.random.Generator) -> list[tuple[str, str, trimesh.Trimesh, bool]]:
+    """The recipe's (or the preset's) objects as local-frame meshes, named ``<category>_<k>``, in recipe order."""
     specs = _expand(recipe.raw.get("objects") or preset["objects"], recipe.where())
     counts: dict[str, int] = {}
     items = []
@@ -191,19 +187,89 @@ def build_room(recipe: Recipe, scale: str, rng: np.random.Generator, look_rng: n
         name = f"{category}_{counts.get(category, 0)}"
         counts[category] = counts.get(category, 0) + 1
         items.append((name, category, mesh, thin))
-    items.sort(key=lambda it: -float(np.prod(it[2].extents[:2])))  # big footprints first
-    margin = 0.15
-    placed = place_on_floor(items, np.array([margin, margin]), np.array([size[0] - margin, size[1] - margin]), rng, keep_clear=clear)
+    return items
+
+
+def _room_options(recipe: Recipe, camera: RoomCameras, path: str) -> None:
+    """Reject camera keys that the chosen path does not use (one error naming the key)."""
+    given = set(recipe.raw.get("cameras") or {})
+    for other, keys in ROOM_CAMERA_KEYS_OF_PATH.items():
+        for key in keys:
+            if other != path and key in given:
+                raise BenchInputError(recipe.where("cameras", key), f"applies to path: {other}, not to path: {path}")
+
+
+def build_room(recipe: Recipe, scale: str, rng: np.random.Generator, look_rng: np.random.Generator | None = None) -> Layout:
+    """A room: shell, furniture (``room.arrangement``) and cameras (``cameras.path``) from ``rng``, its look
+    (finishes, decor, lights; ``look:``) from ``look_rng`` (None: ``default_rng([recipe seed, 3])``);
+    defaults from the preset. ``path: loop`` draws the cameras first and keeps the furniture off them and
+    off the floor in front of doors (the order scenes were first generated in); ``path: walk`` places the
+    furniture first, hangs the decor on the wall spans it leaves free and walks around it."""
+    preset_name = recipe.raw.get("preset", recipe.format)
+    if preset_name not in ROOM_PRESETS:
+        raise BenchInputError(recipe.where("preset"), f"room preset must be one of {sorted(ROOM_PRESETS)}, got {preset_name!r}")
+    preset = ROOM_PRESETS[preset_name]
+    room = recipe.section(RoomSection, "room", scale)
+    camera = recipe.section(RoomCameras, "cameras", scale)
+    arrangement = room.arrangement or str(preset["arrangement"])
+    path = camera.path or str(preset["path"])
+    _room_options(recipe, camera, path)
+    if (arrangement == "walls_and_table") != (path == "walk"):
+        raise BenchInputError(recipe.where("cameras", "path"), f"path: {path} does not go with room.arrangement: {arrangement} "
+                              "(a loop stands where walls_and_table puts the table; scatter leaves no walkway for a walk): "
+                              "use walls_and_table with walk, scatter with loop")
+    size: tuple[float, float, float] = room.size if room.size is not None else \
+        cast(tuple[float, float, float], tuple(float(s * rng.uniform(0.9, 1.1)) for s in preset["size"]))
+    n_views = camera.views if camera.views is not None else int(preset["views"][scale])
+    width, height = _image_size(recipe, scale, preset["image"])
+    jitter = camera.jitter if camera.jitter is not None else float(preset["jitter"])
+    hfov = camera.hfov if camera.hfov is not None else float(preset["hfov"])
+    height_range = camera.height if camera.height is not None else ((1.2, 1.6) if path == "loop" else (1.2, 1.7))
+    if not height_range[1] < size[2]:
+        raise BenchInputError(recipe.where("cameras", "height"), f"need low <= high < the room height {size[2]:g} m, got {list(height_range)}")
+
+    clear: list[np.ndarray] = []
+    if path == "loop":
+        poses = cams.room_path(size, n_views, rng, height_range=height_range, jitter=jitter, radius_frac=camera.loop_radius)
+        clear = [np.array([p[:2, 3] - 0.25, p[:2, 3] + 0.25]) for p in poses]
+
+    shell = build_room_shell(size, rng)
+    look = recipe.section(LookSection, "look", scale, defaults=preset["look"])
+    look_rng = look_rng if look_rng is not None else np.random.default_rng([recipe.seed, 3])
+    items = _room_items(recipe, preset, rng)
+    group: Footprint | None = None
+    roles: dict[str, str] = {}
+    if arrangement == "scatter":
+        dressing = dress_room(shell, size, look, look_rng)
+        clear += dressing.keep_clear
+        ordered = sorted(items, key=lambda it: -float(np.prod(it[2].extents[:2])))  # big footprints first
+        margin = 0.15
+        placed = place_on_floor(ordered, np.array([margin, margin]), np.array([size[0] - margin, size[1] - margin]), rng, keep_clear=clear)
+        footprints = [Footprint.of_mesh(mesh) for _, _, mesh, _ in placed]
+        dropped = sorted({n for n, *_ in items} - {n for n, *_ in placed})
+    else:
+        arranged = arrange_walls_and_table(items, size, rng, camera.clearance)
+        placed, footprints, group, roles, dropped = arranged.placed, arranged.footprints, arranged.group, arranged.roles, arranged.dropped
+        dressing = dress_room(shell, size, look, look_rng, obstacles=[mesh.bounds for _, _, mesh, _ in placed])
+    objects = dressing.objects
     for name, category, mesh, thin in placed:
         objects.append(_scene_object(name, category, mesh, thin, rng))
-    dropped = sorted({n for n, *_ in items} - {n for n, *_ in placed})
+
+    if path == "walk":
+        shake = camera.shake if camera.shake is not None else float(preset.get("shake", 0.0))
+        try:
+            poses = cams.room_walk(size, n_views, rng, obstacles=footprints, around=group, min_clearance=camera.clearance,
+                                   height_range=height_range, jitter=jitter, shake_deg=shake, sweeps=camera.sweeps, sweep_deg=camera.sweep)
+        except ValueError as exc:
+            raise BenchInputError(recipe.where("cameras", "path"), f"walk: {exc}; give a larger room.size or fewer objects") from None
 
     K = np.repeat(cams.intrinsics(width, height, hfov)[None], n_views, axis=0)
     centre = np.array(size) / 2
     radius = 0.5 * float(np.linalg.norm(size)) * 1.05
-    return Layout(objects, K, poses, height, width, _sphere_scale_mat(centre, radius),
-                  splits={"train": np.arange(n_views)},
-                  info={"preset": preset_name, "room_size_m": list(size), "objects_not_placed": dropped, "hfov_deg": hfov, "look": dressing.info},
+    info: dict[str, Any] = {"preset": preset_name, "room_size_m": list(size), "objects_not_placed": dropped, "hfov_deg": hfov, "look": dressing.info}
+    if path == "walk" or arrangement != "scatter":
+        info.update({"arrangement": arrangement, "camera_path": path, "placement": roles})
+    return Layout(objects, K, poses, height, width, _sphere_scale_mat(centre, radius), splits={"train": np.arange(n_views)}, info=info,
                   lighting=dressing.lighting)
 
 

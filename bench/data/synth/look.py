@@ -14,6 +14,7 @@ tiles, directional lighting) nothing is drawn and nothing is changed.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -62,11 +63,14 @@ def _finish(obj: SceneObject, look: LookSection, rng: np.random.Generator) -> Sc
     return obj
 
 
-def dress_room(shell: list[SceneObject], size: tuple[float, float, float], look: LookSection, rng: np.random.Generator) -> Dressing:
+def dress_room(shell: list[SceneObject], size: tuple[float, float, float], look: LookSection, rng: np.random.Generator,
+               obstacles: Sequence[np.ndarray] = ()) -> Dressing:
     """Finish the shell of the box room of ``size`` (sx, sy, sz) m, add the decor and the lights of
-    ``look``, drawing from ``rng`` (draw order: finishes, decor, lights)."""
+    ``look``, drawing from ``rng`` (draw order: finishes, decor, lights). ``obstacles``: (2, 3) world
+    min / max boxes of furniture already standing in the room; no decor is hung on the wall span behind
+    one (below its top), and no door opens onto one (:func:`bench.data.synth.decor.build_decor`)."""
     objects = [_finish(o, look, rng) for o in shell]
-    decor = build_decor(size, look.decor, rng)
+    decor = build_decor(size, look.decor, rng, obstacles)
     objects += decor.objects
     info: dict[str, Any] = {**dataclasses.asdict(look), "decor_items": decor.info}
     if look.lighting == "directional":

@@ -20,10 +20,12 @@ Example (a user's own recipe with their own mesh)::
       - {name: prior_profile, profile: sim-omnidata}
       - {name: segmentation_inconsistent}
 
-Room cameras (``cameras:``): ``views`` (int >= 2), ``hfov`` (degrees), ``jitter`` (m, shakiness),
-``height`` ([low, high] m), ``loop_radius`` (the hand-held loop's radii as a fraction of the room size,
-default 0.12: a small loop in the middle of the room, so the views' baselines are short against depths
-of 2-5 m). Object (DTU-like) cameras: ``distance``, ``hfov``, ``train_azimuths``, ``train_elevations``,
+Room furniture (``room:``): ``arrangement`` ``walls_and_table`` (as rooms have it) or ``scatter``
+(random free spots). Room cameras (``cameras:``): ``path`` ``walk`` (a hand-held walk around the room:
+``shake`` degrees, ``sweeps``, ``sweep`` degrees, ``clearance`` m) or ``loop`` (a small loop in the middle
+of the room: ``loop_radius``, the loop's radii as a fraction of the room size, default 0.12), and for
+both ``views`` (int >= 2), ``hfov`` (degrees), ``jitter`` (m, shakiness), ``height`` ([low, high] m).
+Defaults come from the room preset (``preset:``; docs/scenes.md). Object (DTU-like) cameras: ``distance``, ``hfov``, ``train_azimuths``, ``train_elevations``,
 ``eval_views``; LLFF-like: ``path`` (``grid``: ``grid``, ``spacing``; ``handheld``: ``views``, ``extent``,
 ``rows``, ``jitter``, ``look_jitter``), ``hfov``, ``look_distance``, ``height``; the LLFF-like layout
 itself under ``forward:`` (``depth_range``, ``back_wall``, ``lateral_spread``, ``wall_texture``,
@@ -70,10 +72,15 @@ Degrees = Annotated[float, Range(lo=0, hi=170, lo_open=True)]
 # ---- errors naming the recipe and the key). None = a default that depends on the preset, scale or object.
 @dataclass(frozen=True)
 class RoomSection:
-    """``room:`` of a room recipe: ``size`` [x, y, z] metres (None: the preset's, +-10 % from the seed)."""
+    """``room:`` of a room recipe: ``size`` [x, y, z] metres (None: the preset's, +-10 % from the seed);
+    ``arrangement`` of the furniture (None: the preset's): ``walls_and_table`` (pieces against the walls,
+    lamps and plants in corners, the table with its chairs in the free floor;
+    :func:`bench.data.synth.furnish.arrange_walls_and_table`) or ``scatter`` (random free floor spots,
+    away from a ``loop`` camera path)."""
 
     size: tuple[Annotated[float, Range(lo=1, lo_open=True)], Annotated[float, Range(lo=1, lo_open=True)],
                 Annotated[float, Range(lo=1, lo_open=True)]] | None = None
+    arrangement: Literal["walls_and_table", "scatter"] | None = None
 
 
 @dataclass(frozen=True)
@@ -99,16 +106,29 @@ class LookSection:
 
 @dataclass(frozen=True)
 class RoomCameras:
-    """``cameras:`` of a room recipe (a hand-held loop inside the room)."""
+    """``cameras:`` of a room recipe. ``path`` (None: the preset's): ``walk``, a hand-held walk around the
+    room (:func:`bench.data.synth.cameras.room_walk`; keys ``shake``, ``sweeps``, ``sweep``,
+    ``clearance``), or ``loop``, a small loop in the middle of the room looking across it
+    (:func:`bench.data.synth.cameras.room_path`; key ``loop_radius``)."""
 
+    path: Literal["walk", "loop"] | None = None
     views: Annotated[int, Range(lo=2)] | None = None         # None: the preset's count at the scale
-    jitter: Metres | None = None                              # shakiness, m (None: the preset's)
+    jitter: Metres | None = None                              # shakiness, m (None: the preset's); walk: std of the hand's position noise
     hfov: Degrees | None = None                               # None: the preset's
-    height: tuple[Metres, Metres] = (1.2, 1.6)                # [low, high] camera height, m
-    loop_radius: Annotated[float, Range(lo=0, hi=0.45)] = 0.12  # the loop's radii / room size
+    height: tuple[Metres, Metres] | None = None               # [low, high] camera height, m (None: [1.2, 1.6] loop, [1.2, 1.7] walk)
+    loop_radius: Annotated[float, Range(lo=0, hi=0.45)] = 0.12  # loop: the loop's radii / room size
+    shake: Annotated[float, Range(lo=0, hi=20)] | None = None  # walk: std of roll, pitch and heading noise, degrees (None: the preset's)
+    sweeps: Annotated[int, Range(lo=0, hi=100)] = 4           # walk: turns from the table group to the walls and back per loop
+    sweep: Annotated[float, Range(lo=0, hi=180)] = 100.0      # walk: how far the heading turns away from the group, degrees
+    clearance: Annotated[float, Range(lo=0.1, hi=1)] = 0.3    # walk: least distance from a camera to furniture and walls, m
 
     def check(self) -> str | None:
-        return None if self.height[0] <= self.height[1] else f"height must be [low, high] with low <= high, got {list(self.height)}"
+        if self.height is not None and self.height[0] > self.height[1]:
+            return f"height must be [low, high] with low <= high, got {list(self.height)}"
+        return None
+
+
+ROOM_CAMERA_KEYS_OF_PATH = {"loop": ("loop_radius",), "walk": ("shake", "sweeps", "sweep", "clearance")}
 
 
 @dataclass(frozen=True)
