@@ -113,7 +113,7 @@ def walk_loop(
             start[k] = 0
             walkable = np.flatnonzero(free[k])
         if walkable.size == 0:
-            raise ValueError(f"no walkable floor at {np.degrees(theta[k]):.0f} deg from the room's centre with {min_clearance:g} m clearance")
+            raise ValueError(f"no walkable floor at {np.degrees(theta[k]):.0f} deg from the walk's centre with {min_clearance:g} m clearance")
         a = start[k] + walkable[0]
         blocked = np.flatnonzero(~free[k, a:])
         b = a + (blocked[0] if blocked.size else len(r) - a)
@@ -144,9 +144,8 @@ def room_walk(
     (heading towards ``around``'s centre) and the walls, corners and the pieces along them: the heading is
     the direction to the centre plus ``sweep_deg * sin(2 pi k t + phase)`` (t the fraction of the loop
     walked), so it turns smoothly, k = :func:`walk_sweeps` (``sweeps``, fewer for few frames) times per
-    loop. Pitch looks down at the group
-    (:data:`WALK_FOCUS_HEIGHT`) when facing it and slightly down at the walls otherwise; the height
-    wanders smoothly within ``height_range`` (m). A shaky hand adds Gaussian position noise of std
+    loop. Pitch looks down at the group (:data:`WALK_FOCUS_HEIGHT`) when facing it and slightly down at
+    the walls otherwise; the height wanders smoothly within ``height_range`` (m). A shaky hand adds Gaussian position noise of std
     ``jitter`` metres (horizontal; half of it vertical; dropped where it would break ``min_clearance``)
     and roll / pitch / heading noise of std ``shake_deg`` degrees (0 and 0: a smooth synthetic walk).
 
