@@ -240,3 +240,12 @@ def test_legacy_loop_keys_still_work():
     r = (c[:, :2] - [sx / 2, sy / 2]) / (0.2 * np.array([sx, sy]))
     assert len(c) == 6 and np.allclose(c[:, 2], 1.3) and np.allclose(np.hypot(r[:, 0], r[:, 1]), 1.0)
     assert np.isclose(layout.K[0, 0, 0], 0.5 * layout.width / np.tan(np.deg2rad(25)))
+
+
+def test_few_frames_make_fewer_turns():
+    """At most one turn per 12 frames, so consecutive frames overlap (docs/scenes.md)."""
+    from bench.data.synth.cameras import walk_sweeps
+
+    assert [walk_sweeps(3, 16), walk_sweeps(3, 48), walk_sweeps(5, 30), walk_sweeps(0, 48), walk_sweeps(3, 5)] == [1, 3, 2, 0, 1]
+    assert _layout("scannet_like_tiny", "tiny")[0].info["camera_sweeps"] == 1
+    assert _layout("scannet_like_0", "small")[0].info["camera_sweeps"] == 3

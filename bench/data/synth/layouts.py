@@ -267,8 +267,9 @@ def build_room(recipe: Recipe, scale: str, rng: np.random.Generator, look_rng: n
     centre = np.array(size) / 2
     radius = 0.5 * float(np.linalg.norm(size)) * 1.05
     info: dict[str, Any] = {"preset": preset_name, "room_size_m": list(size), "objects_not_placed": dropped, "hfov_deg": hfov, "look": dressing.info}
-    if path == "walk" or arrangement != "scatter":
-        info.update({"arrangement": arrangement, "camera_path": path, "placement": roles})
+    if path == "walk":
+        info.update({"arrangement": arrangement, "camera_path": path, "placement": roles,
+                     "camera_sweeps": cams.walk_sweeps(camera.sweeps, n_views)})
     return Layout(objects, K, poses, height, width, _sphere_scale_mat(centre, radius), splits={"train": np.arange(n_views)}, info=info,
                   lighting=dressing.lighting)
 

@@ -118,7 +118,7 @@ class RoomCameras:
     height: tuple[Metres, Metres] | None = None               # [low, high] camera height, m (None: [1.2, 1.6] loop, [1.2, 1.7] walk)
     loop_radius: Annotated[float, Range(lo=0, hi=0.45)] = 0.12  # loop: the loop's radii / room size
     shake: Annotated[float, Range(lo=0, hi=20)] | None = None  # walk: std of roll, pitch and heading noise, degrees (None: the preset's)
-    sweeps: Annotated[int, Range(lo=0, hi=100)] = 4           # walk: turns from the table group to the walls and back per loop
+    sweeps: Annotated[int, Range(lo=0, hi=100)] = 3           # walk: turns from the table group to the walls and back per loop
     sweep: Annotated[float, Range(lo=0, hi=180)] = 100.0      # walk: how far the heading turns away from the group, degrees
     clearance: Annotated[float, Range(lo=0.1, hi=1)] = 0.3    # walk: least distance from a camera to furniture and walls, m
 
