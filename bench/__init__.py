@@ -2,4 +2,4 @@
 tables and reports. Data flows one way: recipe -> dataset folder -> Scene -> method -> metrics -> row
 -> table (see README, "Architecture")."""
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"

@@ -264,9 +264,15 @@ def cmd_scenes_card(args: argparse.Namespace) -> int:
     """Print the datasheet card of a recipe (synthesised in memory) or a dataset folder with GT; with
     ``--out`` also write it (and its plot, FILE.png) there."""
     from bench.data.datasheet import render_card, write_card
+    from bench.data.datasheet.card import render_summary
     from bench.data.datasheet.source import card_sheet
 
-    sheet = card_sheet(args.target, args.scale, args.seed, SCENES_DIR)
+    if len(args.target) > 1:  # several scenes: one summary table (the README's)
+        if args.out:
+            raise BenchInputError("--out", "writes one scene's card: give one RECIPE|DIR")
+        print(render_summary({t: card_sheet(t, args.scale, args.seed, SCENES_DIR) for t in args.target}), end="")
+        return 0
+    sheet = card_sheet(args.target[0], args.scale, args.seed, SCENES_DIR)
     print(render_card(sheet), end="")
     if args.out:
         out = Path(args.out)
@@ -341,7 +347,7 @@ def build_parser() -> argparse.ArgumentParser:
     down.set_defaults(func=cmd_scenes_downsize)
     card = scenes.add_parser("card", help="a scene's datasheet (prior errors by region, photometric content, capture) "
                                           "beside real-data anchors, as markdown")
-    card.add_argument("target", metavar="RECIPE|DIR", help="recipe YAML path or scene name (synthesised in memory), "
+    card.add_argument("target", metavar="RECIPE|DIR", nargs="+", help="recipe YAML path or scene name (synthesised in memory), "
                                                              "or a dataset folder with GT depth and instances")
     card.add_argument("--scale", default="small", choices=SCALES, help="recipe only")
     card.add_argument("--seed", type=int, default=None, help="recipe only: override the recipe's seed")

@@ -263,3 +263,21 @@ def test_cli_card_of_a_folder_without_gt_names_the_file(tiny_folder, tmp_path, c
     assert main(["scenes", "card", str(folder)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and str(folder / named) in err[0]
+
+
+def test_summary_table_has_a_row_per_scene_and_the_anchor_row_of_their_profile():
+    from bench.data.datasheet.card import render_summary
+
+    def sheet(name: str, abs_rel: float) -> dict:
+        return {"scene": {"name": name, "format": "scannet", "prior_profile": "sim-omnidata"},
+                "depth_prior": {"all": {"abs_rel": abs_rel, "delta1": 0.95}},
+                "normal_prior": {"all": {"mean_deg": 16.0, "median_deg": 9.0, "within_11_25": 0.6},
+                                 "planar_background": {"mean_deg": 10.0}, "thin": {"mean_deg": 50.0}, "silhouette": {"mean_deg": 30.0}},
+                "photometric": {"textureless_fraction_wall_ceiling": 0.4},
+                "capture": {"views_per_point": {"median": 7.0}, "baseline_depth_ratio": {"median_of_median": 0.8}}}
+
+    text = render_summary({"a": sheet("a", 0.07), "b": sheet("b", 0.05)})
+    rows = [line for line in text.splitlines() if line.startswith("| ")]
+    assert [r.split(" | ")[0] for r in rows] == ["| scene", "| a", "| b", "| real (scannet, anchors of sim-omnidata)"]
+    assert "| 7.0 % | 95.0 % | 16.0 deg | 9.0 deg | 60.0 % | 10 / 50 / 30 deg | 40.0 % | 7 | 0.8 |" in rows[1]
+    assert "5.0 %" in rows[2] and "[1]" in rows[3] and "\n[1] " in text

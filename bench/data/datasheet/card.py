@@ -120,6 +120,55 @@ def render_card(sheet: dict[str, Any], plot_name: str | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
+# The summary's columns: (header, datasheet key, formatter); the anchor row takes each key's anchor.
+SUMMARY_COLUMNS: Rows = [
+    ("depth AbsRel", "depth_prior.all.abs_rel", _pct),
+    ("depth delta1", "depth_prior.all.delta1", _pct),
+    ("normal mean", "normal_prior.all.mean_deg", _deg),
+    ("normal median", "normal_prior.all.median_deg", _deg),
+    ("normal < 11.25 deg", "normal_prior.all.within_11_25", _pct),
+    ("normal mean planar / thin / silhouette", "", _deg),
+    ("textureless wall + ceiling", "photometric.textureless_fraction_wall_ceiling", _pct),
+    ("views per point (median)", "capture.views_per_point.median", _num),
+    ("baseline / depth", "capture.baseline_depth_ratio.median_of_median", _num),
+]
+
+
+def _summary_cell(sheet: dict[str, Any], key: str, fmt: Fmt) -> str:
+    if not key:  # the normal prior's error by region: where the real errors lie
+        parts = [_get(sheet, f"normal_prior.{r}.mean_deg") for r in ("planar_background", "thin", "silhouette")]
+        return " / ".join("n/a" if v is None else f"{v:.0f}" for v in parts) + " deg"
+    value = _get(sheet, key)
+    return "n/a" if value is None else fmt(value)
+
+
+def render_summary(sheets: dict[str, dict[str, Any]]) -> str:
+    """One markdown table of several scenes' datasheets (a row each, the headline fields), then a row per
+    prior profile / dataset of the real-data anchors of those fields, with their sources."""
+    header = ["scene", "prior profile"] + [h for h, _, _ in SUMMARY_COLUMNS]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    anchor_rows: dict[tuple[str | None, str], dict[str, Anchor]] = {}
+    for name, sheet in sheets.items():
+        info = sheet["scene"]
+        used, anchors, _ = anchors_for(info.get("prior_profile"), str(info.get("format")))
+        anchor_rows.setdefault((used, str(info.get("format"))), anchors)
+        cells = [name, str(info.get("prior_profile") or "-")] + [_summary_cell(sheet, k, f) for _, k, f in SUMMARY_COLUMNS]
+        lines.append("| " + " | ".join(cells) + " |")
+    notes: dict[str, int] = {}
+    for (profile, dataset), anchors in anchor_rows.items():
+        cells = [f"real ({dataset}, anchors of {profile})", "-"]
+        for _, key, fmt in SUMMARY_COLUMNS:
+            a = anchors.get(key) if key else None
+            if a is None:
+                cells.append("-")
+                continue
+            k = notes.setdefault(a.note, len(notes) + 1)
+            cells.append(f"{_anchor_text(a, fmt)} [{k}]")
+        lines.append("| " + " | ".join(cells) + " |")
+    lines += [""] + [f"[{k}] {note}." for note, k in notes.items()]
+    return "\n".join(lines) + "\n"
+
+
 def datasheet_figure(sheet: dict[str, Any]) -> bytes:
     """PNG: left, the CDF of the normal-prior angular error per region (the ScanNet anchor's shares at
     11.25 / 22.5 / 30 deg as markers); right, the histogram of views per sampled surface point."""
