@@ -14,7 +14,7 @@ mean over the scenes, two rounds (each knob against one anchor; the others are f
 documented character), and the fitted values are printed to be written into profiles.py by hand.
 The knob-to-anchor pairing is the calibration procedure of docs/effects.md ("Calibration").
 
-Usage (from the repository root; about 1 min without --fit, 15-20 min with it, on 2 cores):
+Usage (from the repository root; about 1 min without --fit, 20-30 min with it, on 2 cores):
     python scripts/calibrate_priors.py [--scenes scannet_like_0,scannet_like_1,replica_like_0]
         [--profiles sim-omnidata,...] [--scale small] [--fit]
 (``--profiles sim-omnidata-legacy,...`` measures the legacy profiles against the same anchors.)

@@ -1,8 +1,10 @@
 """MonoInstance uncertainty stage (methods/monoinstance): alignment, association, uncertainty, stability.
 
 Floors on scannet_like_tiny were MEASURED first (docs/uncertainty.md) and are asserted a bit below:
-association with mono depth aligned to GT depth: ARI_fg 0.994, ARI 0.734, purity 0.946;
-uncertainty with ref = GT: Spearman 0.50, mean U thin 0.77 vs planar foreground 0.38.
+association with mono depth aligned to GT depth, on the scene made with the legacy sim-omnidata profile:
+ARI_fg 0.994, ARI 0.734, purity 0.946; uncertainty with ref = GT: Spearman 0.50, mean U thin 0.77 vs
+planar foreground 0.38. With the calibrated sim-omnidata profile (the shared ``tiny_scene``): association
+ARI_fg 0.647, ARI 0.312, purity 0.936; Spearman 0.29, mean U thin 0.79 vs planar foreground 0.41.
 """
 
 from __future__ import annotations
@@ -111,8 +113,8 @@ def test_ari_purity_reference_values():
 def tiny_legacy_scene():
     """scannet_like_tiny made with the legacy sim-omnidata prior profile: the scene the association floors
     below were measured on (the same bytes as before the profiles were calibrated). With the calibrated
-    sim-omnidata (the shared ``tiny_scene``) the same code measures ARI_fg 0.957, ARI 0.290, purity 1.000:
-    its failure regions split the walls' segments between views (docs/effects.md, "Calibration")."""
+    sim-omnidata (the shared ``tiny_scene``) the same code measures ARI_fg 0.647, ARI 0.312, purity 0.936
+    (its gross failure regions and its different segmentation draws both lower it)."""
     from bench.data.datasets import recipe_path
     from bench.data.synth.make import make_scene
     from bench.data.synth.recipe import load_recipe, with_effect_overrides
@@ -165,9 +167,9 @@ def test_uncertainty_quality_on_tiny_scene(tiny_result):
     U = tiny_result.uncertainty
     assert U.dtype == np.float32 and U.shape == tiny_result.aligned_depth.shape
     assert np.all(np.isfinite(U)) and U.min() >= 0 and U.max() <= 1
-    assert q["unc_spearman"] > 0  # measured 0.50
-    assert q["unc_mean_thin"] > q["unc_mean_planar"]  # measured 0.77 vs 0.38
-    assert q["assoc_ari_fg"] > 0.95
+    assert q["unc_spearman"] > 0  # measured 0.29 (0.50 with the legacy profile)
+    assert q["unc_mean_thin"] > q["unc_mean_planar"]  # measured 0.79 vs 0.41 (0.77 vs 0.38)
+    assert q["assoc_ari_fg"] > 0.6  # measured 0.647 (0.994 with the legacy profile: test_association_on_tiny_scene_against_gt)
     for k in ("align", "segmentation", "uncertainty"):
         assert tiny_result.timings[k] >= 0
     # background and non-instance pixels: U = 0

@@ -546,16 +546,22 @@ def test_failure_regions_change_exactly_the_recorded_regions(scene):
         expect, covered = gt.copy(), np.zeros((H, W), dtype=bool)
         for cx, cy, radius, err, *_axis, angle in regions[v]:
             assert 4.0 <= radius <= 8.0 and 0.2 <= abs(err) <= 0.5 and 20.0 <= angle <= 60.0
-            wt = region_weight(H, W, cx, cy, radius)
+            segment = _SCENE.gt_instance[v] == _SCENE.gt_instance[v][int(cy), int(cx)]  # follow_segment
+            wt = region_weight(H, W, cx, cy, radius) * segment
             expect = np.where(gt > 0, expect * (1.0 + err * wt), 0.0)
             covered |= wt > 0
         np.testing.assert_allclose(scene.mono_depth[v], expect, rtol=1e-6)
         assert np.array_equal(scene.mono_normal[v][~covered], _SCENE.mono_normal[v][~covered])
-        if regions[v]:
-            core = region_weight(H, W, *regions[v][0][:3]) >= 1.0
-            core &= gt > 0
-            assert _angle_deg(scene.mono_normal[v][core], _SCENE.mono_normal[v][core]).min() > 0.0 or not core.any()
     _check_unit_and_facing(scene)
+    # a plain disc without follow_segment: it crosses the segment boundaries
+    s2 = copy.deepcopy(_SCENE)
+    (rec,) = apply_effects(s2, [{"name": "prior_failure_regions", "count": 3.0, "follow_segment": False}], rng(2))
+    crossed = 0
+    for v, view in enumerate(rec["sampled"]["regions"]):
+        changed = s2.mono_depth[v] != _SCENE.mono_depth[v]
+        for cx, cy, *_ in view:
+            crossed += int((changed & (_SCENE.gt_instance[v] != _SCENE.gt_instance[v][int(cy), int(cx)])).any())
+    assert crossed > 0
 
 
 def test_failure_regions_background_weight_zero_centres_on_objects(scene):

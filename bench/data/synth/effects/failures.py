@@ -47,6 +47,11 @@ class FailureRegionParams:
     normal_error_deg: tuple[float, float] = param(
         (20.0, 60.0), "range", lo=0.0, hi=180.0, unit="deg", doc="normal rotation angle at the core, drawn uniformly"
     )
+    follow_segment: bool = param(
+        True,
+        "bool",
+        doc="a region covers only the GT instance its centre falls on (a misread image segment), not a plain disc",
+    )
     background_weight: float = param(
         1.0,
         "float",
@@ -95,7 +100,9 @@ def prior_failure_regions(scene: Scene, p: FailureRegionParams, rng: np.random.G
     instances) plus a uniform offset within the pixel, radius ``~ U(radius_px)``, depth error
     ``e = +-U(depth_error)`` (sign 50/50), rotation axis uniform on the sphere, angle
     ``~ U(normal_error_deg)`` (drawn in this order). Weight ``w``: 1 up to ``EDGE_PX`` = 2 px inside the
-    radius, falling linearly to 0 at the radius (:func:`region_weight`). ``d' = d (1 + e w)`` (floored
+    radius, falling linearly to 0 at the radius (:func:`region_weight`); with ``follow_segment`` (and
+    ``gt_instance``) 0 outside the GT instance of the centre pixel, so a failure follows the outline of
+    the segment it misreads (an object, a picture, a wall) instead of straddling a silhouette. ``d' = d (1 + e w)`` (floored
     at 1 mm); normals rotated by ``w`` x angle about the axis (scipy ``Rotation``), then unit length and
     facing the camera. Invalid pixels stay 0. Put it after the depth and normal effects it perturbs.
 
@@ -103,7 +110,7 @@ def prior_failure_regions(scene: Scene, p: FailureRegionParams, rng: np.random.G
     angle_deg]`` each, and the fraction of the image they cover.
 
     Parameters: count (mean per view), radius_px (px), depth_error (relative), normal_error_deg (deg),
-    background_weight (relative probability).
+    follow_segment (bool), background_weight (relative probability).
     """
     depth = cast(np.ndarray, scene.mono_depth)  # rendered by the synthesiser before any effect runs
     normals = cast(np.ndarray, scene.mono_normal)
@@ -128,6 +135,8 @@ def prior_failure_regions(scene: Scene, p: FailureRegionParams, rng: np.random.G
             axis /= max(float(np.linalg.norm(axis)), 1e-12)
             angle = np.radians(rng.uniform(*p.normal_error_deg))
             wt = region_weight(h, w, cx, cy, radius)
+            if p.follow_segment and scene.gt_instance is not None:
+                wt = wt * (scene.gt_instance[v] == scene.gt_instance[v][idx // w, idx % w])
             d = np.where(valid, np.maximum(d * (1.0 + err * wt), MIN_DEPTH), 0.0)
             rot = Rotation.from_rotvec((wt.reshape(-1, 1) * angle) * axis[None, :])
             n = rot.apply(n.reshape(-1, 3)).reshape(h, w, 3)
