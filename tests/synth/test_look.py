@@ -41,14 +41,13 @@ def _look(preset: str, **overrides) -> LookSection:
 
 # ----------------------------------------------------------------------------- legacy presets
 @pytest.mark.parametrize("name", ["scannet_like_tiny", "replica_like_0"])
-def test_legacy_preset_reproduces_the_plain_room(name):
-    """The ``*-legacy`` presets generate the rooms of the version before decor and room lighting:
-    per-view means of the images (after effects), GT depth and prior depth to 1e-6 and the instance
-    pixel counts exactly, against a fingerprint stored with that version."""
+def test_legacy_recipes_reproduce_the_earlier_rooms(name):
+    """``configs/scenes/legacy/`` (the ``*-legacy`` presets and prior profiles) generate the rooms of the
+    version before decor, room lighting, the walk and the calibrated priors: per-view means of the images
+    (after effects), GT depth and prior depth to 1e-6, the instance names and pixel counts exactly, against
+    a fingerprint stored with that version."""
     expected = json.loads(FINGERPRINTS.read_text())[name]
-    data = yaml.safe_load((SCENES / f"{name}.yaml").read_text())
-    data["preset"] = {"scannet": "scannet-legacy", "replica": "replica-legacy"}.get(data["preset"], data["preset"])
-    scene, _ = make_scene(parse_recipe(data, name), scale="tiny")
+    scene, _ = make_scene(load_recipe(SCENES / "legacy" / f"{name}.yaml"), scale="tiny")
     n = scene.num_views
     np.testing.assert_allclose(scene.images.reshape(n, -1).astype(np.float64).mean(1), expected["rgb_mean"], atol=1e-6, rtol=0)
     np.testing.assert_allclose(scene.gt_depth.reshape(n, -1).astype(np.float64).mean(1), expected["depth_mean"], atol=1e-6, rtol=0)

@@ -8,7 +8,7 @@ result is stored as float32.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, cast
+from typing import Any, Iterator, cast
 
 import numpy as np
 from scipy import ndimage
@@ -19,6 +19,47 @@ from ._params import param
 from .registry import register
 
 MIN_DEPTH = 1e-3  # metres: floor keeping a valid prior positive after a negative shift
+
+
+# ----------------------------------------------------------------------------- shared parameter fields
+# Parameter fields shared by the depth and normal effects (one definition each; a dataclass field
+# object cannot be shared between classes, hence factories).
+def edge_threshold_field() -> Any:
+    """``edge_threshold``: where an occlusion boundary is (:func:`depth_discontinuities`)."""
+    return param(
+        0.1,
+        "float",
+        lo=0.0,
+        lo_open=True,
+        unit="1",
+        doc="occlusion boundary where abs(second difference of 1/z) > threshold * 1/z (0 on planes)",
+    )
+
+
+def edge_strength_field() -> Any:
+    return param(1.0, "float", lo=0.0, hi=1.0, unit="1", doc="blend weight at the boundary")
+
+
+def thin_kernel_field() -> Any:
+    return param(5, "int", lo=0, hi=64, unit="px", doc="k of the k x k opening defining thin parts (< 2 = off)")
+
+
+def max_freq_field() -> Any:
+    return param(
+        1.0,
+        "float",
+        lo=0.0,
+        lo_open=True,
+        hi=8.0,
+        unit="cycles / image",
+        doc="frequencies drawn in [0.5, 1] x max_freq cycles across the longer image side",
+    )
+
+
+def correlation_field(default: float) -> Any:
+    return param(
+        default, "float", lo=0.0, hi=64.0, unit="px", doc="Gaussian sigma correlating the noise field (0 = white)"
+    )
 
 
 # ----------------------------------------------------------------------------- mono_depth_affine
@@ -78,18 +119,9 @@ class DepthBleedingParams:
     edge_width_px: int = param(
         2, "int", lo=0, hi=64, unit="px", doc="half-width of the band blurred across occlusion boundaries (0 = off)"
     )
-    edge_threshold: float = param(
-        0.1,
-        "float",
-        lo=0.0,
-        lo_open=True,
-        unit="1",
-        doc="occlusion boundary where abs(second difference of 1/z) > threshold * 1/z (0 on planes)",
-    )
-    edge_strength: float = param(1.0, "float", lo=0.0, hi=1.0, unit="1", doc="blend weight at the boundary")
-    thin_kernel_px: int = param(
-        5, "int", lo=0, hi=64, unit="px", doc="k of the k x k opening defining thin parts (< 2 = off)"
-    )
+    edge_threshold: float = edge_threshold_field()
+    edge_strength: float = edge_strength_field()
+    thin_kernel_px: int = thin_kernel_field()
     thin_pull: tuple[float, float] = param(
         (0.2, 0.8), "range", lo=0.0, hi=1.0, unit="1", doc="fraction f pulling a thin part to the background depth"
     )
@@ -116,6 +148,91 @@ def thin_mask(mask: np.ndarray, k: int) -> np.ndarray:
     return mask & ~opened
 
 
+@dataclass(frozen=True)
+class ThinPart:
+    """The thin pixels of one foreground instance in one view (see :func:`thin_parts`).
+
+    Attributes:
+        instance_id: the GT instance id.
+        mask: (H, W) bool, all thin pixels of the instance.
+        components: its 8-connected components, (H, W) bool each, in label (raster) order.
+        nearest_outside: index arrays (iy, ix), (H, W) each: for every pixel, the nearest valid pixel
+            outside the instance (the background around it).
+    """
+
+    instance_id: int
+    mask: np.ndarray
+    components: list[np.ndarray]
+    nearest_outside: tuple[np.ndarray, np.ndarray]
+
+
+def thin_parts(scene: Scene, v: int, valid: np.ndarray, k: int) -> Iterator[ThinPart]:
+    """The thin parts of view ``v``'s foreground GT instances, in increasing instance id.
+
+    A foreground instance is one not marked ``is_background`` in ``scene.instances`` (or absent from
+    it); its thin pixels are those a k x k opening removes (:func:`thin_mask`), restricted to
+    ``valid``. Instances without thin pixels, or with no valid pixel outside them, are skipped.
+
+    Args:
+        scene: needs ``gt_instance``. v: view index. valid: (H, W) bool. k: opening size (< 2: none).
+    """
+    if k < 2 or scene.gt_instance is None:
+        return
+    inst = scene.gt_instance[v]
+    for iid in np.unique(inst):
+        iid = int(iid)
+        if iid == 0:
+            continue
+        info = scene.instances.get(iid)
+        if info is not None and info.is_background:
+            continue
+        mask = inst == iid
+        thin = thin_mask(mask, k) & valid
+        source = valid & ~mask
+        if not thin.any() or not source.any():
+            continue
+        _, (iy, ix) = ndimage.distance_transform_edt(~source, return_indices=True)
+        labels, n_comp = ndimage.label(thin, structure=np.ones((3, 3), dtype=bool))
+        yield ThinPart(iid, thin, [labels == c for c in range(1, n_comp + 1)], (iy, ix))
+
+
+def pull_thin_parts(
+    values: np.ndarray,
+    scene: Scene,
+    v: int,
+    valid: np.ndarray,
+    k: int,
+    pull: tuple[float, float],
+    vanish_prob: float,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, list[float], int]:
+    """Pull every thin component of view ``v`` (:func:`thin_parts`) towards the background around it.
+
+    Per component, in instance then raster order: ``f ~ U(pull)``, then ``f = 1`` with ``vanish_prob``
+    (two draws); ``out = (1 - f) values + f values[nearest pixel outside the instance]``.
+
+    Args:
+        values: (H, W) or (H, W, C) float64 field of the view (depth, normals).
+        scene: needs ``gt_instance`` (nothing happens without it). valid: (H, W) bool. k: opening size.
+
+    Returns:
+        (pulled copy of ``values``, the fractions f drawn, number of thin pixels).
+    """
+    out = values.copy()
+    fractions: list[float] = []
+    n_thin = 0
+    for part in thin_parts(scene, v, valid, k):
+        background = values[part.nearest_outside]
+        for comp in part.components:
+            f = float(rng.uniform(*pull))
+            if rng.random() < vanish_prob:
+                f = 1.0
+            out[comp] = (1.0 - f) * values[comp] + f * background[comp]
+            fractions.append(f)
+        n_thin += int(part.mask.sum())
+    return out, fractions, n_thin
+
+
 def depth_discontinuities(depth: np.ndarray, threshold: float) -> np.ndarray:
     """Occlusion-boundary pixels of a z-depth map (0 = invalid).
 
@@ -138,6 +255,40 @@ def depth_discontinuities(depth: np.ndarray, threshold: float) -> np.ndarray:
     ok = valid[:-2] & valid[1:-1] & valid[2:]
     disc[1:-1] |= ok & (dd > threshold * s[1:-1])
     return disc
+
+
+def blend_across_boundaries(
+    values: np.ndarray, valid: np.ndarray, boundary: np.ndarray, width_px: int, strength: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Blend a field towards its local box average in a band around boundary pixels.
+
+    Within ``width_px`` of a ``boundary`` pixel the value is moved towards its
+    ``(2 width_px + 1)^2`` box average over valid pixels (so the two sides of the boundary mix), with
+    a weight falling linearly from ``strength`` at the boundary to 0 at distance ``width_px``.
+
+    Args:
+        values: (H, W) or (H, W, C) float64 field (a vector field is averaged per component).
+        valid: (H, W) bool, pixels that carry a value (the only ones averaged and changed).
+        boundary: (H, W) bool boundary pixels (nothing happens when empty).
+        width_px: half-width of the band in pixels (0 = off). strength: blend weight at the boundary.
+
+    Returns:
+        (blended copy of ``values``, (H, W) bool band of changed pixels).
+    """
+    out = values.copy()
+    if width_px <= 0 or strength <= 0 or not boundary.any():
+        return out, np.zeros(valid.shape, dtype=bool)
+    dist = ndimage.distance_transform_edt(~boundary)
+    weight = strength * np.clip(1.0 - dist / width_px, 0.0, 1.0)
+    size = 2 * width_px + 1
+    den = ndimage.uniform_filter(valid.astype(np.float64), size=size, mode="nearest")
+    band = valid & (weight > 0)
+    channels = [out] if out.ndim == 2 else [out[..., c] for c in range(out.shape[-1])]
+    for ch in channels:  # views into ``out``: updated in place
+        num = ndimage.uniform_filter(np.where(valid, ch, 0.0), size=size, mode="nearest")
+        blur = np.where(den > 1e-9, num / np.maximum(den, 1e-9), ch)
+        ch[band] = ch[band] + weight[band] * (blur[band] - ch[band])
+    return out, band
 
 
 @register("depth_bleeding", DepthBleedingParams, needs=("mono_depth",))
@@ -173,51 +324,15 @@ def depth_bleeding(scene: Scene, p: DepthBleedingParams, rng: np.random.Generato
     for v in range(n_views):
         d = depth[v].astype(np.float64)
         valid = d > 0
-        out = d.copy()
-        view_pulls: list[float] = []
-        n_thin = 0
         # (b) thin structures, per foreground instance
-        if p.thin_kernel_px >= 2 and scene.gt_instance is not None:
-            inst = scene.gt_instance[v]
-            for iid in np.unique(inst):
-                iid = int(iid)
-                if iid == 0:
-                    continue
-                info = scene.instances.get(iid)
-                if info is not None and info.is_background:
-                    continue
-                mask = inst == iid
-                thin = thin_mask(mask, p.thin_kernel_px) & valid
-                source = valid & ~mask
-                if not thin.any() or not source.any():
-                    continue
-                _, (iy, ix) = ndimage.distance_transform_edt(~source, return_indices=True)
-                d_bg = d[iy, ix]
-                labels, n_comp = ndimage.label(thin, structure=np.ones((3, 3), dtype=bool))
-                for c in range(1, n_comp + 1):
-                    f = float(rng.uniform(*p.thin_pull))
-                    if rng.random() < p.thin_vanish_prob:
-                        f = 1.0
-                    comp = labels == c
-                    out[comp] = (1.0 - f) * d[comp] + f * d_bg[comp]
-                    view_pulls.append(f)
-                n_thin += int(thin.sum())
+        out, view_pulls, n_thin = pull_thin_parts(d, scene, v, valid, p.thin_kernel_px, p.thin_pull, p.thin_vanish_prob, rng)
         # (a) bleeding across occlusion boundaries
         n_edge = 0
         if p.edge_width_px > 0 and p.edge_strength > 0:
             ref = scene.gt_depth[v] if scene.gt_depth is not None else depth[v]
             disc = depth_discontinuities(ref.astype(np.float64), p.edge_threshold) & valid
-            if disc.any():
-                w = p.edge_width_px
-                dist = ndimage.distance_transform_edt(~disc)
-                weight = p.edge_strength * np.clip(1.0 - dist / w, 0.0, 1.0)
-                size = 2 * w + 1
-                num = ndimage.uniform_filter(np.where(valid, out, 0.0), size=size, mode="nearest")
-                den = ndimage.uniform_filter(valid.astype(np.float64), size=size, mode="nearest")
-                blur = np.where(den > 1e-9, num / np.maximum(den, 1e-9), out)
-                band = valid & (weight > 0)
-                out[band] = out[band] + weight[band] * (blur[band] - out[band])
-                n_edge = int(band.sum())
+            out, band = blend_across_boundaries(out, valid, disc, p.edge_width_px, p.edge_strength)
+            n_edge = int(band.sum())
         depth[v] = np.where(valid, out, 0.0).astype(np.float32)
         pulls.append(view_pulls)
         thin_px.append(n_thin)
@@ -232,15 +347,33 @@ class LowFreqWarpParams:
         0.1, "float", lo=0.0, hi=0.9, unit="1", doc="max abs(w) of the multiplicative warp d' = d (1 + w)"
     )
     n_terms: int = param(3, "int", lo=1, hi=32, unit="1", doc="number of random 2D cosines summed")
-    max_freq: float = param(
-        1.0,
-        "float",
-        lo=0.0,
-        lo_open=True,
-        hi=8.0,
-        unit="cycles / image",
-        doc="frequencies drawn in [0.5, 1] x max_freq cycles across the longer image side",
-    )
+    max_freq: float = max_freq_field()
+
+
+def image_coords(h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
+    """(H, W) pixel-centre coordinates x, y divided by the longer image side (so in [0, 1])."""
+    side = float(max(h, w))
+    x, y = np.meshgrid((np.arange(w) + 0.5) / side, (np.arange(h) + 0.5) / side)
+    return x, y
+
+
+def lowfreq_field(rng: np.random.Generator, x: np.ndarray, y: np.ndarray, n_terms: int, max_freq: float) -> np.ndarray:
+    """A random smooth field ``sum_k a_k cos(2 pi r_k (cos th_k x + sin th_k y) + phi_k)``.
+
+    ``a_k ~ N(0, 1)``, ``r_k ~ U(0.5, 1) max_freq`` cycles per longer image side, ``th_k, phi_k ~
+    U(0, 2 pi)``, drawn in that order per term. ``x``, ``y``: (H, W) from :func:`image_coords`.
+
+    Returns:
+        (H, W) float64 field, not normalised.
+    """
+    field = np.zeros(x.shape)
+    for _ in range(n_terms):
+        a = rng.standard_normal()
+        r = rng.uniform(0.5, 1.0) * max_freq
+        th = rng.uniform(0.0, 2 * np.pi)
+        phi = rng.uniform(0.0, 2 * np.pi)
+        field += a * np.cos(2 * np.pi * r * (np.cos(th) * x + np.sin(th) * y) + phi)
+    return field
 
 
 @register("lowfreq_warp", LowFreqWarpParams, needs=("mono_depth",))
@@ -260,17 +393,10 @@ def lowfreq_warp(scene: Scene, p: LowFreqWarpParams, rng: np.random.Generator) -
     """
     depth = cast(np.ndarray, scene.mono_depth)  # rendered by the synthesiser before any effect runs
     n_views, h, w_px = depth.shape
-    side = float(max(h, w_px))
-    x, y = np.meshgrid((np.arange(w_px) + 0.5) / side, (np.arange(h) + 0.5) / side)
+    x, y = image_coords(h, w_px)
     peak = []
     for v in range(n_views):
-        warp = np.zeros((h, w_px))
-        for _ in range(p.n_terms):
-            a = rng.standard_normal()
-            r = rng.uniform(0.5, 1.0) * p.max_freq
-            th = rng.uniform(0.0, 2 * np.pi)
-            phi = rng.uniform(0.0, 2 * np.pi)
-            warp += a * np.cos(2 * np.pi * r * (np.cos(th) * x + np.sin(th) * y) + phi)
+        warp = lowfreq_field(rng, x, y, p.n_terms, p.max_freq)
         warp -= warp.mean()
         m = np.abs(warp).max()
         warp = warp * (p.amplitude / m) if m > 1e-12 else np.zeros_like(warp)
@@ -284,9 +410,7 @@ def lowfreq_warp(scene: Scene, p: LowFreqWarpParams, rng: np.random.Generator) -
 @dataclass(frozen=True)
 class DepthNoiseParams:
     sigma: float = param(0.01, "float", lo=0.0, hi=0.5, unit="1 (relative)", doc="std of the multiplicative noise")
-    correlation_px: float = param(
-        0.0, "float", lo=0.0, hi=64.0, unit="px", doc="Gaussian sigma correlating the noise field (0 = white)"
-    )
+    correlation_px: float = correlation_field(0.0)
 
 
 @register("depth_noise", DepthNoiseParams, needs=("mono_depth",))
