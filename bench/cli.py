@@ -5,7 +5,8 @@
     bench scenes make RECIPE --out DIR           synthesise a scene into a dataset folder
     bench scenes downsize SRC DST --factor N     a dataset folder at 1/N of its image size, same format
     bench scenes card RECIPE|DIR [--scale S] [--seed N] [--out FILE.md]
-                                                 the scene's datasheet beside real-data anchors (docs/datasheet.md)
+                                                 the scene's datasheet beside real-data anchors (docs/datasheet.md);
+                                                 several scenes: one summary table
     bench run --table NAME [--scale small] ...   run a table's jobs, write CSV / markdown / plot
               [--executor local|dask] [--workers N] [--scheduler tcp://HOST:PORT] [--retries R]
     bench regress --table NAME [--scale small] [--update-reference]
@@ -348,7 +349,8 @@ def build_parser() -> argparse.ArgumentParser:
     card = scenes.add_parser("card", help="a scene's datasheet (prior errors by region, photometric content, capture) "
                                           "beside real-data anchors, as markdown")
     card.add_argument("target", metavar="RECIPE|DIR", nargs="+", help="recipe YAML path or scene name (synthesised in memory), "
-                                                             "or a dataset folder with GT depth and instances")
+                                                             "or a dataset folder with GT depth and instances; several: one summary "
+                                                             "table of their headline fields")
     card.add_argument("--scale", default="small", choices=SCALES, help="recipe only")
     card.add_argument("--seed", type=int, default=None, help="recipe only: override the recipe's seed")
     card.add_argument("--out", default=None, metavar="FILE.md", help="also write the card there, and its plot as FILE.png")
