@@ -5,9 +5,9 @@ A claim compares means. For each comparison we also say whether the difference e
 spread ``std_a + std_b`` (a deliberately conservative test; unknown with one seed). A claim is HELD only
 if every comparison goes its way by more than that spread, and NOT HELD only if one goes against it by
 more than that spread; otherwise it is ``UNDECIDED (within the seed spread: ...; as measured: ...)``.
-Measured reason (session 25): the Table 3 runs of two rasteriser kernels that differ only in float
+Measured reason: the Table 3 runs of two rasteriser kernels that differ only in float
 rounding gave every claim of that table opposite verdicts, every difference inside the spread (Gaussian
-densification is chaotic to rounding; docs/gaussians.md). With one seed the spread is unknown and the
+densification is chaotic to rounding; docs/studies/gaussian-rasteriser-and-llff-runs.md). With one seed the spread is unknown and the
 verdict is the measured one.
 
 Convergence: a claim comparing a row that has not converged (the verdicts of

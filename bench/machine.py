@@ -1,8 +1,7 @@
 """What machine a result was measured on: the CPU model, recorded in every job row and printed by the benchmarks.
 
-Times depend on it more than on most code changes: the VM's CPU changes between sessions, and the same code took
-72-82 s of training per small-preset SDF job on one AMD EPYC and 108-134 s on another (README, measured speed,
-session 24). Metrics do not depend on it (every F identical in both runs)."""
+Times depend on it more than on most code changes: a VM's CPU can change between runs, and the same code took
+72-82 s of training per small-preset SDF job on one AMD EPYC and 108-134 s on another (docs/performance.md). Metrics do not depend on it (every F identical in both runs)."""
 
 from __future__ import annotations
 

@@ -5,8 +5,8 @@ MonoSDF and MonoInstance, forward and backward) with Intel oneMKL. MKL picks its
 (``mkl_serv_intel_cpu_true``), not by the instructions the CPU has: on an AMD CPU with AVX-512 it runs a
 generic path. Measured on this project's 2-core AMD EPYC (Zen 5, AVX-512), 1 thread, float32
 (``benchmarks/bench_mkl_dispatch.py``): the (32768 x 32) @ (32 x 32) product of our MLP layers 91 -> 233
-GFLOP/s, 1024^3 111 -> 254 GFLOP/s; a whole MonoSDF training step 62-65 -> 51-55 ms (README, speed). On an
-AMD EPYC without AVX-512 (Zen 3, AVX2; session 28) MKL's AVX2 path instead of the generic one: the MLP
+GFLOP/s, 1024^3 111 -> 254 GFLOP/s; a whole MonoSDF training step 62-65 -> 51-55 ms (docs/performance.md). On an
+AMD EPYC without AVX-512 (Zen 3, AVX2) MKL's AVX2 path instead of the generic one: the MLP
 products 55-74 -> 67-94 GFLOP/s (1024^3 unchanged at ~90, the core's peak), a step -8 % (best of 40 steps
 85-94 -> 79-85 ms, process CPU time, 1 thread, five alternating pairs).
 
@@ -20,7 +20,7 @@ the environment).
 
 What changes is the order of float operations inside each matrix product, nothing else: the same inputs give
 the same products to float32 rounding (``tests/harness/test_mkl_dispatch.py`` compares the two paths on
-matrices and on whole MonoSDF steps). Long training runs are chaotic to rounding (docs/monosdf.md, session 10),
+matrices and on whole MonoSDF steps). Long training runs are chaotic to rounding (docs/studies/float-rounding-chaos.md),
 so the path is recorded in every job row (``blas``) and enters the full job id like the thread count
 (:func:`bench.runner.job_id_for`): a row computed on the other path is never silently reused.
 

@@ -39,7 +39,7 @@ def job_id_for(plan: JobPlan, config: dict[str, Any], threads: int | None = None
     without it, the *base id* that tables and reports match results by. With ``threads`` the id also
     covers this process's matrix-product code path (:func:`bench.mkl_dispatch.blas_path`, which the
     local executor's workers inherit) when it is not the default one, and a config's ``flush_denormals``
-    (session 23) and ``coarse_gradient_pass`` (session 26) when on (the base id leaves them out through
+    and ``coarse_gradient_pass`` when on (the base id leaves them out through
     ``id_neutral``), for the same reason."""
     from bench.mkl_dispatch import blas_path
 

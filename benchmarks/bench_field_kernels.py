@@ -5,7 +5,7 @@ Times, per call (median of ``--repeat``, wall clock, ``--threads`` threads), for
   * the chain rule of the encoding, forward and backward (``pe_chain`` vs ``pe_chain_reference``);
   * softplus(beta=100) with its slope, forward and backward (``_softplus_and_slope`` fast vs reference), on
     pre-activations around the knee (z ~ N(0, 0.05^2)) and large ones (z ~ N(0, 2^2): |100 z| > 87 on 66 % of the
-    values, where an unfloored ``expf`` underflows and libmvec took its scalar path: 16.1 ms before session 23's
+    values, where an unfloored ``expf`` underflows and libmvec took its scalar path: 16.1 ms without the
     floor, 1.3 ms after, forward, 1 thread).
 
 P defaults to 34304, the points of one default step (512 rays x 64 samples + 1536 eikonal points).

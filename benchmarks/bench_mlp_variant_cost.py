@@ -1,5 +1,5 @@
 """Benchmark: cost per sample of MonoSDF-style SDF MLPs without the grid (the MLP variant the MonoInstance
-release trains, and CPU-scaled versions of it), for planning (docs/monosdf.md, session 12).
+release trains, and CPU-scaled versions of it), for planning (docs/studies/monosdf-mlp-variant.md).
 
 Proxy of the training step's SDF part: positional encoding (6 frequencies) -> MLP (softplus, beta 100,
 optional skip connection re-injecting the input / sqrt 2) -> SDF + geometry feature; the gradient with

@@ -18,10 +18,10 @@ jobs), and prints their summed throughput (the copies share memory bandwidth and
 the throughput of one copy alone). ``--compile`` wraps the SDF and colour networks' forward in ``torch.compile``
 (``dynamic=True``; the C++ kernels are graph breaks) and prints the warmup's wall time, compilation included
 (Inductor's on-disk cache, ``TORCHINDUCTOR_CACHE_DIR``, shortens it in later processes); the harness does not use it
-(session 28: no gain, docs/monosdf.md).
+(no gain: docs/studies/monosdf-speed.md).
 
-Goals: issue 4, >= 0.5 M ray-samples/s (met in session 4); issue 16, >= 2 M on 2 cores (session 21: 1.36 M for one job
-on 2 threads, 1.66 M for two single-threaded copies side by side, ``--processes 2``).
+Goals: >= 0.5 M ray-samples/s for one job (met), >= 2 M on 2 cores (not yet met: 1.36 M for one job
+on 2 threads on an AMD EPYC, 1.66 M for two single-threaded copies side by side, ``--processes 2``).
 """
 
 from __future__ import annotations

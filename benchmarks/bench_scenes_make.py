@@ -3,7 +3,7 @@
 Usage:
     .venv/bin/python benchmarks/bench_scenes_make.py [--scale small] [--repeat 3]
 
-Goal (issue 2): each small-scale preset <= 10 s on 2 cores.
+Goal: each small-scale preset <= 10 s on 2 cores.
 """
 
 from __future__ import annotations

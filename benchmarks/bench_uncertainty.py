@@ -8,7 +8,7 @@ Runs ``methods.monoinstance.run_uncertainty_stage`` on one scene with the GT dep
 metric information), prints wall seconds per stage and the CPU seconds of the whole stage (best of ``--repeats``; the
 load average is printed because the machine may be shared) and the quality figures of the last run. ``--set`` overrides stage
 parameters (YAML values, e.g. ``--set align_mode=scale_shift --set density_ref_points=5000``).
-Goal (issue 5): the whole stage <= 10% of stage-2 training (~2-4 min), i.e. <= 10 s at small scale.
+Goal: the whole stage <= 10% of stage-2 training (~2-4 min), i.e. <= 10 s at small scale.
 """
 
 from __future__ import annotations

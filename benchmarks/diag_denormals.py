@@ -9,7 +9,7 @@ Usage (the checkpoint from the step benchmark, a late point of the schedule):
     .venv/bin/python benchmarks/bench_monosdf_step.py --train 2000 --checkpoint /tmp/monosdf_2000.pt --steps 1 --no-profile
     .venv/bin/python benchmarks/diag_denormals.py --checkpoint /tmp/monosdf_2000.pt [--scene scannet_like_0] [--scale small]
 
-Session 23, 2000-iteration checkpoint of scannet_like_0 (small): 0.9-2.6 % of the operands of the SDF MLP's
+Measured on a 2000-iteration checkpoint of scannet_like_0 (small): 0.9-2.6 % of the operands of the SDF MLP's
 backward products (the (34304, 32) gradients of the pre-activations and the weight-gradient products) were
 denormal, none of the forward's; with them ``aten::mm`` took 609 ms over 5 profiled steps, 92 ms flushed.
 """

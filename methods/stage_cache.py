@@ -1,7 +1,7 @@
 """Checkpoints of a training stage that several jobs share exactly, trained once and reused.
 
 Table 4's four MonoInstance rows run the same stage 1 (plain MonoSDF for the first quarter of the schedule: the
-modules switch on only after it); the session-24 ablation run had all 24 trained jobs identical at 25 % to the 6
+modules switch on only after it); a measured ablation run had all 24 trained jobs identical at 25 % to the 6
 digits the CSV holds, row by row. A method that knows such a stage keys its end state by everything that decides
 it (:func:`stage_key`: config, data, seed, thread count, matrix-product path, code), stores it here, and a later job
 with the same key loads it instead of training it again. Results do not change: the loaded state is the one the

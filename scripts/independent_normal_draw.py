@@ -1,4 +1,4 @@
-"""DIAGNOSTIC dataset (issue 14): a scene's depth prior with a normal prior from an independent draw of the
+"""DIAGNOSTIC dataset (docs/studies/normal-prior-independent-errors.md): a scene's depth prior with a normal prior from an independent draw of the
 same prior-error process.
 
 The legacy profiles (``*-legacy``) compute the normal prior from the perturbed depth prior (``normal_from_depth``

@@ -1,5 +1,5 @@
 """Is a scene's monocular depth prior biased per object once it is aligned to GT, and do its normals
-face the camera more or less than the GT normals? (issue 14)
+face the camera more or less than the GT normals? (docs/studies/base-below-priors-only.md)
 
 For every view, align the mono depth prior to the GT depth with an affine map and report, per GT object,
 the median ratio aligned prior / GT depth over all views (< 1: the aligned prior puts the object closer to

@@ -1,4 +1,4 @@
-"""How far does a uniformly shrunk room move in the training images? (issue 14, the shrunk-room mode)
+"""How far does a uniformly shrunk room move in the training images? (the shrunk-room mode, docs/studies/monosdf-stuck-mode-and-scale-bias.md)
 
 The scale-and-shift-invariant depth loss accepts, for every view at once, a room shrunk by a factor k
 about the cameras' centroid c0 (each view's depth becomes nearly an affine map of the true one); the

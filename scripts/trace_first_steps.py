@@ -4,7 +4,7 @@ Builds a MonoSDF trainer exactly as a study run does (same config resolution, sa
 every ``--every`` steps: the minimum SDF over a grid of the extraction cube (``mesh_extent``, or the
 bounding sphere), the fraction of that grid inside the surface (SDF < 0), beta, and the step's loss
 terms. A surface that vanishes shows as ``min sdf`` crossing 0 and ``inside`` dropping to 0; the
-renders then come from the background shell (the bounding-sphere clamp). Used in session 16 to find
+renders then come from the background shell (the bounding-sphere clamp). Used to find
 that the DTU-like objects (bounding sphere R = 4) lost the initial ball within 3 steps on seed 1 when the
 SDF MLP worked in ``x / R`` coordinates (docs/monosdf.md, "Object scenes").
 

@@ -10,7 +10,7 @@ and its own TORCH_EXTENSIONS_DIR, so each builds its own C++ kernel):
 Prints, at steps 0, 1, 5, 20, 50, 100, 200 and the last: the total loss, the colour and depth terms and the
 L1 norm of the grid table. Identical code gives identical lines (the runs are deterministic); code that
 differs only in the order of float operations agrees to ~7 digits for the first steps and then diverges
-(docs/monosdf.md, session 10).
+(docs/studies/float-rounding-chaos.md).
 """
 
 from __future__ import annotations

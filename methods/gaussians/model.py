@@ -22,7 +22,7 @@ matched points). Like SfM's tracks, a match must be seen in every other training
 (``all_views``), and the patches are compared after removing each patch's mean (``cost="zero_mean"``;
 the sensor's per-view exposure gain otherwise biases the match towards wrong planes). Measured on the
 hand-held LLFF-like scenes (64 planes; fraction of matched pixels whose depth is within 10 % of the GT):
-SAD over valid views, ratio 0.5 (the session-5 sweep): 0.16-0.33, median depth / GT 0.36-0.77 (points far
+SAD over valid views, ratio 0.5 (the earlier default): 0.16-0.33, median depth / GT 0.36-0.77 (points far
 in front of the surfaces); zero-mean, all views, ratio 0.3 (the default): 0.77-0.95, median 0.99-1.02,
 with ~1/3 as many points (``scripts/fewshot_properties.py`` README section "Table 3 scenes"). Optionally
 ``n_random`` points at random pixels of the training views and random inverse depth within the bounds

@@ -11,7 +11,7 @@ Where our port and the official code can differ, a config key chooses (default: 
 "Mask constraint: official code vs ours"):
 
 * ``mask_hit_threshold``: a sample is in the source mask if the bilinear mask value exceeds it (code: 0, about
-  1 px of dilation; ours until session 10: 0.5).
+  1 px of dilation; an earlier default here: 0.5).
 * ``mask_count_rule``: which rays count. ``code``: ``sum_i w_i inside_i > 0.01`` (projections inside the image
   carry weight) and at least one sample in the mask; ``ours``: ``sum_i w_i valid_i > 0.01`` (weight inside
   the mask) and at least one valid sample.

@@ -1,7 +1,7 @@
 // Float32 denormal mode (FTZ: flush results to zero, DAZ: read denormal operands as zero) in every thread that
 // runs this process's tensor arithmetic. torch.set_flush_denormal sets it in the calling thread only, and the
 // mode is per thread (x86 MXCSR), so the OpenMP pool that runs ATen's parallel ops and MKL's products keeps IEEE
-// arithmetic: a 2-thread training step lost most of flush_denormals' gain (session 23, docs/monosdf.md).
+// arithmetic: a 2-thread training step lost most of flush_denormals' gain (docs/studies/monosdf-speed.md).
 // ATen, MKL (GNU threading) and this extension share one libgomp (torch/lib/libgomp.so.1), so one parallel
 // region reaches every pool thread; threads the pool creates later inherit the creating thread's mode (POSIX).
 #include <torch/extension.h>

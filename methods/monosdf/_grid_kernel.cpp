@@ -4,12 +4,12 @@
 // table: (rows, F) float32. feat: (P, L*F); jac: (P, 3, L*F) = d feat / d x.
 //
 // Two implementations of the same contract (benchmarks/bench_grid_kernel.py times both):
-// * AVX-512 (where compiled with -march=native on a CPU that has it; the default then, session 20): 16 points
+// * AVX-512 (where compiled with -march=native on a CPU that has it; the default then): 16 points
 //   per instruction (cell arithmetic, hash, gathers of the table rows). With the Jacobian, every level of a
 //   block of 16 points before the next block, so each point's output rows are written whole; features alone,
 //   levels outer (as below); the backward computes the 16 points' contributions at once and adds them to the
 //   thread's table copy point by point. In training steps ~1.8x the per-point forward with the Jacobian and
-//   ~2x its backward (docs/monosdf.md, speed, session 20).
+//   ~2x its backward (docs/studies/monosdf-speed.md).
 // * per point (the twin the tests compare it with; set_simd_kernel(false)): levels are the OUTER loop, so one
 //   level's slice of the table (<= 2^log2_table rows) stays in the core's L2 cache while all points visit it.
 // Both compute the hash in uint32 (its low bits equal the int64 reference's, since the table size is a power

@@ -1,4 +1,4 @@
-"""Float32 denormal handling for training steps (``flush_denormals``, config; docs/monosdf.md, session 23).
+"""Float32 denormal handling for training steps (``flush_denormals``, config; docs/studies/monosdf-speed.md).
 
 Arithmetic on denormal floats (|x| < 1.18e-38) takes a slow microcode path on x86; a sharp SDF field produces them
 in the backward of its MLP (softplus slopes sigmoid(100 z) below e^-87). Flush-to-zero / denormals-are-zero
@@ -6,7 +6,7 @@ in the backward of its MLP (softplus slopes sigmoid(100 z) below e^-87). Flush-t
 
 The mode is a per-thread register (MXCSR). ``torch.set_flush_denormal`` sets it in the calling thread only, so
 the OpenMP pool that runs ATen's parallel ops and MKL's matrix products kept IEEE arithmetic and a 2-thread step
-lost most of the gain (session 23). :func:`denormals_flushed` sets it in the calling thread and in every pool
+lost most of the gain. :func:`denormals_flushed` sets it in the calling thread and in every pool
 thread (through the C++ extension, ``_float_mode.cpp``); where the extension is unavailable it falls back to the
 calling thread only (:func:`pool_threads_reached` says which).
 """
@@ -53,7 +53,7 @@ def denormals_flushed(on: bool = True, pool_threads: bool = True) -> Iterator[No
     ``pool_threads=False``: in the calling thread only (:func:`set_flush_denormal`).
 
     The mode is reset to IEEE rather than restored (torch has no call that reads it): left on process-wide, scipy's
-    ``cKDTree.query_ball_point`` in a later DTU evaluation crashed (segfault, session 23's CI)."""
+    ``cKDTree.query_ball_point`` in a later DTU evaluation crashed (segfault in CI)."""
     if not on:
         yield
         return

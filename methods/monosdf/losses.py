@@ -69,7 +69,7 @@ def ssi_depth_fit(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor
         fixed_scale: a DIAGNOSTIC, not MonoSDF: no fit, ``scale = fixed_scale`` and shift 0 (a metric
             depth loss; meaningful only for a metric prior such as the exact GT depth, with the scene's
             metres per normalised unit). It tests whether the scale-and-shift ambiguity is what holds a
-            run back (docs/monosdf.md, session 7).
+            run back (docs/studies/monosdf-scale-and-shift-ambiguity.md).
 
     Returns:
         (scalar loss (0 when no ray is valid), the fitted scale (detached)).

@@ -169,7 +169,7 @@ class MonoSDFTrainer:
     def _set_beta_floor(self) -> None:
         """``beta_floor``: beta >= beta_floor * (1 - t / beta_floor_until) + beta_min for the first
         ``beta_floor_until`` of the schedule (t = fraction done), then MonoSDF's beta_min: the surface
-        stays soft while the objects are still to be carved out of free space (docs/monosdf.md, session 6)."""
+        stays soft while the objects are still to be carved out of free space (docs/studies/monosdf-stuck-mode-and-scale-bias.md)."""
         floor, until = float(self.cfg.beta_floor or 0.0), float(self.cfg.beta_floor_until or 0.0)
         frac = self.step_count / max(int(self.cfg.iterations), 1)
         extra = floor * max(0.0, 1.0 - frac / until) if floor > 0 and until > 0 else 0.0
@@ -255,7 +255,7 @@ class MonoSDFTrainer:
         """One optimisation step (:meth:`_step`), with float32 denormals flushed to 0 (FTZ / DAZ) while it runs when
         ``flush_denormals`` is on: arithmetic on denormals takes a slow microcode path, and a sharp field (softplus
         slopes sigmoid(100 z), the products of the backward) produces them; values change only below 1.2e-38
-        (docs/monosdf.md, session 23). The mode is set in the OpenMP pool threads too (through the C++ extension:
+        (docs/studies/monosdf-speed.md). The mode is set in the OpenMP pool threads too (through the C++ extension:
         not with ``fast_grid: false``, which runs without C++) and reset to IEEE after the step
         (``float_mode.denormals_flushed``)."""
         with denormals_flushed(self.cfg.flush_denormals, pool_threads=self.cfg.fast_grid):  # fast_grid false: no C++ at all
@@ -501,7 +501,7 @@ class MonoSDFTrainer:
                 "log": {"sums": dict(self._log_sums), "count": self._log_count, "depth_scales": list(self._depth_scales)}}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        """Restore :meth:`state_dict` (checkpoints written before session 24 lack the global RNG, the pruning
+        """Restore :meth:`state_dict` (older checkpoints lack the global RNG, the pruning
         fraction and the diagnostics' running sums: those keep their current values)."""
         self.sdf.load_state_dict(state["sdf"])
         self.color.load_state_dict(state["color"])

@@ -1,4 +1,4 @@
-"""`bench regress` catches a module switched off on purpose (issue 5 acceptance), end to end at the tiny
+"""`bench regress` catches a module switched off on purpose, end to end at the tiny
 scale: a reference is stored from the real "+Mono Uncertainty" row, then the same row is rerun with
 its uncertainty module disabled in the table config. The module's own output (the uncertainty-quality
 metrics, tracked as extra metrics) disappears, so the regression run must exit 1 and say which cells

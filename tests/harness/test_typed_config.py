@@ -91,7 +91,7 @@ METHODS = ("monosdf", "monoinstance", "gs3d", "fsgs", "monoinstance_gs", "oracle
 @pytest.mark.parametrize("name", METHODS)
 def test_every_preset_is_typed_and_its_values_live_only_in_the_yaml(name):
     """Each shipped method declares a typed config whose keys are exactly its YAML's, with no dataclass
-    defaults (a second copy of a value would drift: issue 19), and every scale preset validates."""
+    defaults (a second copy of a value would drift), and every scale preset validates."""
     from methods.registry import config_type, method_config, typed_method_config
 
     ctype = config_type(name)
@@ -142,7 +142,7 @@ def test_id_neutral_keys_leave_job_ids_alone_only_at_their_neutral_value():
 
 
 def test_flush_denormals_stays_out_of_the_base_id_and_enters_the_full_id():
-    """``flush_denormals`` (float-rounding kind, session 23): at its default the base id that tables match rows by is
+    """``flush_denormals`` (float-rounding kind): at its default the base id that tables match rows by is
     the one of the rows published before the key existed (IEEE arithmetic); the full id that decides reuse differs, so
     an IEEE row is not reused as a flushed one."""
     from bench.jobs import JobPlan

@@ -1,7 +1,7 @@
 """``methods.monosdf.float_mode``: FTZ / DAZ reach torch's OpenMP pool threads, not only the calling thread.
 
 torch.set_flush_denormal alone sets the calling thread's mode; a parallel op's other chunks ran with IEEE arithmetic
-(session 23: a 2-thread step lost most of the flush's gain). The checks use 2 pool threads whatever the machine has
+(a 2-thread step lost most of the flush's gain). The checks use 2 pool threads whatever the machine has
 (OpenMP starts them even on one core)."""
 
 from __future__ import annotations

@@ -88,7 +88,7 @@ def test_mask_constraint_loss_is_finite_and_reaches_the_sdf(tiny_scene):
 def test_mask_constraint_options_and_diagnostics(tiny_scene):
     """The official code's normalisation never exceeds ours (its denominators count empty sources and
     instances too), a lower mask-hit threshold counts at least as many rays, and the diagnostics describe
-    the counted rays (issue 15: rays, instances, sum of w * valid, reference - warped colour)."""
+    the counted rays (rays, instances, sum of w * valid, reference - warped colour)."""
     from methods.monoinstance.mask_constraint import MaskConstraint
     from methods.monosdf.trainer import MonoSDFTrainer
 

@@ -411,7 +411,7 @@ def test_flush_denormals_holds_during_a_step_only_and_steps_stay_finite(tiny_sce
         assert all(np.isfinite(v) for v in tr.step().values())
         assert float((tiny * 1.0)[0, 0]) == pytest.approx(1e-39, rel=1e-3)  # IEEE again after the step
     assert seen[0] == 0.0 and seen[1] == pytest.approx(1e-39, rel=1e-3)
-    if pool_threads_reached():  # every OpenMP pool thread flushes during the step (session 24), none without it
+    if pool_threads_reached():  # every OpenMP pool thread flushes during the step, none without it
         assert set(modes[0]) == {1} and set(modes[1]) == {0}
     assert set(flush_denormal_per_thread()) <= {0, -1}
 

@@ -147,7 +147,7 @@ class NormalFromDepthParams:
         "choice",
         choices=("prior_to_gt", "gt_to_prior"),
         doc="the alignment's least squares: GT ~ s prior + t (the prior's errors attenuate s, so grazing "
-        "surfaces face the camera more) or prior ~ c GT + d inverted (no attenuation; a diagnostic, session 14)",
+        "surfaces face the camera more) or prior ~ c GT + d inverted (no attenuation; a diagnostic)",
     )
 
 
