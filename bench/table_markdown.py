@@ -8,6 +8,8 @@ partly failed row is never silently averaged over fewer jobs.
 from __future__ import annotations
 
 import math
+import re
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -203,9 +205,34 @@ def _claims_markdown(report: TableReport) -> str:
     for cr in report.claims:
         c = cr.claim
         note = " (on partial data: some cells miss results)" if cr.partial and not cr.verdict.startswith("UNDECIDED") else ""
-        lines.append(f"- **{cr.verdict}**{note} `{c.id}`: {c.text} (paper's own values: {cr.paper_verdict})")
+        lines.append(_claim_line(cr.verdict, note, c.id, c.text, cr.paper_verdict))
         lines += [f"    - {d}" for d in cr.details]
     lines += ["", "A claim is HELD when every comparison goes its way by more than the combined seed spread (std + std), "
               "NOT HELD when one goes against it by more than that; otherwise UNDECIDED, with the verdict on the measured "
               "means in brackets (`bench/claims.py`)."]
     return "\n".join(lines)
+
+
+# One claim's line in a table's markdown; :func:`read_claims` parses it back (the README's glance reads published tables).
+_CLAIM_LINE = re.compile(r"^- \*\*(?P<verdict>[^*]+)\*\*(?P<note> \(on partial data[^)]*\))? `(?P<id>[^`]+)`: (?P<text>.*) "
+                         r"\(paper's own values: (?P<paper>[^()]*)\)$")
+
+
+def _claim_line(verdict: str, note: str, claim_id: str, text: str, paper_verdict: str) -> str:
+    return f"- **{verdict}**{note} `{claim_id}`: {text} (paper's own values: {paper_verdict})"
+
+
+@dataclass(frozen=True)
+class ClaimLine:
+    """A claim's verdict as a table's markdown states it (:func:`read_claims`)."""
+
+    id: str
+    text: str
+    verdict: str
+    paper_verdict: str
+
+
+def read_claims(markdown: str) -> list[ClaimLine]:
+    """The claims of a table's markdown (as :func:`to_markdown` writes them), in order; [] without any."""
+    found = (_CLAIM_LINE.match(line) for line in markdown.splitlines())
+    return [ClaimLine(m["id"], m["text"], m["verdict"], m["paper"]) for m in found if m]
