@@ -1,5 +1,5 @@
 """The benchmark harness: scene synthesis, on-disk formats and loaders, method registry, job runner,
 tables and reports. Data flows one way: recipe -> dataset folder -> Scene -> method -> metrics -> row
--> table (see README, "Architecture")."""
+-> table (see docs/architecture.md)."""
 
 __version__ = "0.2.0"

@@ -56,7 +56,7 @@ def _load_plugins() -> None:
     """Methods from installed packages: every entry point of the group :data:`PLUGIN_GROUP`
     (``name = "package.module:Class"``) registers ``Class`` under ``name``; the class says where its
     config lives (``config_path``: a YAML of the same shape as ``configs/methods/*.yaml``). Example:
-    ``examples/plugin_method`` (README, "Your own method")."""
+    ``examples/plugin_method`` (docs/usage.md, "Your own method")."""
     global _plugins_loaded
     if _plugins_loaded:
         return

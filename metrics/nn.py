@@ -13,7 +13,7 @@ along a Morton curve, the results mapped back to the caller's order). A mesh's s
 face order and its vertices in marching-cubes order, so consecutive queries jump across the scene and
 every query walks the tree from a cold cache; in Z-order consecutive queries visit the same nodes.
 Exact (same distances; the index of the nearest point can differ only between equidistant points) and
-measured 1.5-3x faster per direction at one thread on the dense table's meshes (README).
+measured 1.5-3x faster per direction at one thread on the dense table's meshes (docs/performance.md).
 """
 
 from __future__ import annotations

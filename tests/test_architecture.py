@@ -1,4 +1,4 @@
-"""The import layers of the project (README "Architecture") and no import cycle among its modules.
+"""The import layers of the project (docs/architecture.md) and no import cycle among its modules.
 
 Layers: ``metrics`` (standalone library) <- ``bench.data`` (the Scene contract, formats, synthesis,
 errors, atomic writes) <- ``methods`` <- the rest of ``bench`` (jobs, runner, executors, evaluation,

@@ -1,10 +1,10 @@
 """The product carries no development history: no numbered work session or tracker issue in any tracked
 text file (README, docs, code, comments, docstrings, configs, test names), and no figure named by one.
 
-A reader who was not there cannot use "as session 10 measured" or "by issue 14's criteria"; a comment that
+A reader who was not there cannot use "as session N measured" or "by issue N's criteria" (N a number); a comment that
 explains why a value is what it is names the study in ``docs/studies/`` or the measurement instead.
 What the check matches: the word ``session`` or ``issue`` (any case, optionally plural) followed by a number,
-with spaces, ``#``, ``-`` or ``_`` between ("Session 10's", "issue #14", "session-24", "test_issue5").
+with spaces, ``#``, ``-`` or ``_`` between ("Session N's", "issue #N", "session-N", "test_issueN", with N a number).
 """
 
 from __future__ import annotations

@@ -24,7 +24,7 @@ the sensor's per-view exposure gain otherwise biases the match towards wrong pla
 hand-held LLFF-like scenes (64 planes; fraction of matched pixels whose depth is within 10 % of the GT):
 SAD over valid views, ratio 0.5 (the earlier default): 0.16-0.33, median depth / GT 0.36-0.77 (points far
 in front of the surfaces); zero-mean, all views, ratio 0.3 (the default): 0.77-0.95, median 0.99-1.02,
-with ~1/3 as many points (``scripts/fewshot_properties.py`` README section "Table 3 scenes"). Optionally
+with ~1/3 as many points (``scripts/fewshot_properties.py``, docs/tables.md "Table 3 scenes"). Optionally
 ``n_random`` points at random pixels of the training views and random inverse depth within the bounds
 (3DGS's random init; the configs' ``init_random`` is 0, as FSGS / 3DGS with SfM points). Uses only the
 training images, poses and bounds: no priors, no GT, and it is the same for all three rows.

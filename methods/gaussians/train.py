@@ -165,7 +165,7 @@ def train_gaussians(scene: Scene, cfg: GaussianConfig, seed: int, progress: Call
                 depths = np.stack([torch.where(o["alpha"] >= 0.5, o["depth"] / o["alpha"].clamp_min(1e-6), torch.zeros_like(o["alpha"])).numpy()
                                    for o in outs])  # expected z-depth where the view is covered (as _render_depths)
                 train_renders = np.stack([render(params, viewmats[v], Ks[v], W, H, deg, bg, **rkw)["color"].clamp(0, 1).numpy() for v in train])
-            # few-shot overfitting, measured: PSNR on the training views beside the test views' (README "Table 3 scenes")
+            # few-shot overfitting, measured: PSNR on the training views beside the test views' (docs/tables.md "Table 3 scenes")
             extra.setdefault("train_psnr", []).append(float(psnr(train_renders, scene.images[train]).mean))
             timings["render"] += time.perf_counter() - t
             snapshots.append(Snapshot(fraction=snap_steps[step + 1], iterations=step + 1, seconds=train_seconds + timings["init"] + timings["uncertainty"],

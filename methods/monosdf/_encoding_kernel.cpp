@@ -1,7 +1,7 @@
 // Positional encoding of the SDF network's input (field.py::SDFNetwork.encode) and the chain rule of its
 // explicit gradient, one pass per point each. Same contract as the PyTorch twin (tests compare them); the
 // twin's elementwise ops over (P, F, 3) tensors broadcast against (1, F, 1) frequencies, which PyTorch runs
-// as inner loops of 3 elements (~12 % of a training step, measured: docs/monosdf.md, speed).
+// as inner loops of 3 elements (~12 % of a training step, measured: docs/studies/monosdf-speed.md).
 //
 // Layout of pe (P, 3 + 6F): [u (3), sin(f_0 u) (3), ..., sin(f_{F-1} u) (3), cos(f_0 u) (3), ..., cos(f_{F-1} u) (3)].
 #include <torch/extension.h>

@@ -284,7 +284,7 @@ def render_rays(
             over all samples, exceeds it (plus each ray's highest-weight sample); the others keep their
             no-gradient SDF in the compositing (so transmittance is unchanged) and no colour / normal
             (their weights are below ``prune_weight``). 0 = every sample with gradients (MonoSDF). Late in
-            training, when beta is small, most samples carry no weight (docs/monosdf.md, speed).
+            training, when beta is small, most samples carry no weight (docs/studies/monosdf-speed.md).
             ``RenderOutput.grad`` is 0 at pruned samples; ``RenderOutput.kept`` counts the rendered ones.
         coarse_sdf: (R, S) SDF already known at some samples (NaN elsewhere; ``hierarchical_samples(...,
             with_coarse_sdf=True)``): the pruning pass evaluates only the unknown ones.

@@ -49,7 +49,7 @@ def resolve_inside_out(value: Any, scene: Scene) -> bool:
 
 
 PRUNE_WORTH = 0.75  # prune_weight: prune only while the last step had at most this fraction of samples above it
-                   # (the no-gradient pass over all samples costs ~15 % of a step: measured, docs/monosdf.md speed)
+                   # (the no-gradient pass over all samples costs ~15 % of a step: measured, docs/studies/monosdf-speed.md)
 WEIGHTED_SAMPLE = 1e-4  # a sample with a smaller rendering weight counts as empty space in ``samples_weighted``
 
 
