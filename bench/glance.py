@@ -19,6 +19,7 @@ from typing import Sequence
 
 import pandas as pd
 
+from bench import doc_blocks
 from bench.data.errors import BenchInputError
 from bench.table_markdown import read_claims
 from bench.table_spec import Column, TableSpec
@@ -113,22 +114,11 @@ def render_glance(specs: Sequence[TableSpec], results_dir: str | Path, link_pref
     return "\n\n".join(table_glance(s, Path(results_dir), link_prefix) for s in sorted(specs, key=_table_number)) + "\n"
 
 
-def _span(document: str, where: str | Path) -> tuple[int, int]:
-    """Where the block's text starts (after the :data:`BEGIN` line) and ends (at :data:`END`)."""
-    start, end = document.find(BEGIN), document.find(END)
-    if start < 0 or end < start:
-        raise BenchInputError(where, f"no results block: expected the lines {BEGIN!r} and {END!r}, in that order")
-    return start + len(BEGIN) + 1, end
-
-
 def replace_block(document: str, block: str, where: str | Path = "README.md") -> str:
-    """``document`` with the text between :data:`BEGIN` and :data:`END` replaced by ``block``;
-    BenchInputError naming ``where`` when the markers are missing or out of order."""
-    start, end = _span(document, where)
-    return document[:start] + block + document[end:]
+    """``document`` with the results block replaced by ``block`` (:func:`bench.doc_blocks.replace_block`)."""
+    return doc_blocks.replace_block(document, block, BEGIN, END, where)
 
 
 def current_block(document: str, where: str | Path = "README.md") -> str:
-    """The text between the markers (what :func:`replace_block` replaces)."""
-    start, end = _span(document, where)
-    return document[start:end]
+    """The results block's current text (:func:`bench.doc_blocks.current_block`)."""
+    return doc_blocks.current_block(document, BEGIN, END, where)

@@ -4,7 +4,6 @@ tables, and the rendering reads the published outputs (tidy CSV, claims of the m
 from __future__ import annotations
 
 import shutil
-import sys
 from pathlib import Path
 
 import pandas as pd
@@ -20,13 +19,8 @@ PUBLISHED = REPO / "results" / "published" / "small"
 
 
 @pytest.fixture(scope="module")
-def readme_results():
-    sys.path.insert(0, str(REPO / "scripts"))
-    try:
-        import readme_results as module
-    finally:
-        sys.path.remove(str(REPO / "scripts"))
-    return module
+def readme_results(load_script):
+    return load_script("readme_results")
 
 
 def test_the_readme_block_equals_a_fresh_rendering(readme_results):
@@ -65,7 +59,7 @@ def test_a_missing_output_or_missing_markers_is_one_clear_error(tmp_path):
     [spec] = load_tables(["llff"])
     with pytest.raises(BenchInputError, match="llff.csv.*run `bench report` first"):
         table_glance(spec, tmp_path)
-    with pytest.raises(BenchInputError, match="no results block"):
+    with pytest.raises(BenchInputError, match="no generated block"):
         replace_block("# A README without the block\n", "x\n")
     doc = f"intro\n{BEGIN}\nold\n{END}\nrest\n"
     assert replace_block(doc, "new\n") == f"intro\n{BEGIN}\nnew\n{END}\nrest\n"
