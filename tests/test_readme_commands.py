@@ -1,6 +1,6 @@
-"""The README's commands run: its code blocks are read, and every command that neither trains nor runs a table
-(``bench list``, ``bench config``, ``bench report``, ``bench scenes make`` / ``card``) is run at the tiny scale in
-a temporary folder; the commands that train (``run``, ``regress``, ``study``, ``fit``) are recognised and left to
+"""The documented commands run: the code blocks of the README and of the manual's usage pages are read, and every
+command that neither trains nor runs a table (``bench list``, ``bench config``, ``bench report``, ``bench scenes make``
+/ ``card``) is run at the tiny scale in a temporary folder, in the order the pages give them; the commands that train (``run``, ``regress``, ``study``, ``fit``) are recognised and left to
 the end-to-end tests of their own."""
 
 from __future__ import annotations
@@ -15,6 +15,9 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
+# Pages whose commands a user runs as written, grouped in the order a user runs them: the datasheet page cards the
+# README's `data/s0`.
+PAGES = (("README.md", "docs/datasheet.md"), ("docs/usage.md",))
 CHEAP = ("list", "config", "report", "scenes")  # subcommands that do not train
 TRAINING = ("run", "regress", "study", "fit")
 
@@ -43,8 +46,8 @@ def bench_commands(markdown: str) -> list[list[str]]:
 def tiny(args: list[str], tmp: Path) -> list[str]:
     """The command at the tiny scale, writing into ``tmp`` (its relative ``--out`` lands there too)."""
     args = list(args)
-    if args[0] in ("scenes", "report") and "--scale" not in args:
-        args += ["--scale", "tiny"]
+    if args[0] in ("scenes", "report"):
+        args = [a for i, a in enumerate(args) if a != "--scale" and (i == 0 or args[i - 1] != "--scale")] + ["--scale", "tiny"]
     if args[0] == "report" and "--out" not in args:
         args += ["--out", str(tmp / "results")]
     return args
@@ -65,15 +68,26 @@ def test_the_extraction_reads_blocks_and_drops_options_and_comments():
                                   ["list"], ["report", "--scale", "small"]]
 
 
+def your_own_file(args: list[str]) -> bool:
+    """True when the command names a file of the user's (a recipe YAML that is not in the repository)."""
+    return any(a.endswith(".yaml") and not (REPO / a).exists() for a in args)
+
+
 @pytest.mark.slow
-def test_the_cheap_readme_commands_run_at_the_tiny_scale(tmp_path):
-    commands = [c for c in bench_commands((REPO / "README.md").read_text(encoding="utf-8")) if c[0] in CHEAP]
-    assert commands
+def test_the_cheap_documented_commands_run_at_the_tiny_scale(tmp_path):
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))}
-    for args in commands:
-        args = tiny(args, tmp_path)
-        res = subprocess.run([sys.executable, "-m", "bench.cli", *args], cwd=tmp_path, env=env, capture_output=True,
-                             text=True, timeout=600)
-        assert res.returncode == 0, f"bench {' '.join(args)} failed:\n{res.stdout[-2000:]}\n{res.stderr[-2000:]}"
-        assert res.stdout.strip(), f"bench {' '.join(args)} printed nothing"
-    assert (tmp_path / "data" / "s0").is_dir()  # the README's `bench scenes make ... --out data/s0`
+    ran = []
+    for n, group in enumerate(PAGES):  # each group's commands in order, in a folder of its own (later ones use earlier outputs)
+        cwd = tmp_path / str(n)
+        cwd.mkdir()
+        for page, args in [(page, c) for page in group for c in bench_commands((REPO / page).read_text(encoding="utf-8"))]:
+            if args[0] not in CHEAP or your_own_file(args):
+                continue
+            args = tiny(args, cwd)
+            res = subprocess.run([sys.executable, "-m", "bench.cli", *args], cwd=cwd, env=env, capture_output=True,
+                                 text=True, timeout=600)
+            assert res.returncode == 0, f"{page}: bench {' '.join(args)} failed:\n{res.stdout[-2000:]}\n{res.stderr[-2000:]}"
+            assert res.stdout.strip(), f"{page}: bench {' '.join(args)} printed nothing"
+            ran.append((page, args[0]))
+    assert {page for page, _ in ran} == {page for group in PAGES for page in group} and len(ran) >= 8
+    assert (tmp_path / "0" / "data" / "s0").is_dir()  # the README's `bench scenes make ... --out data/s0`
