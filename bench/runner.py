@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any, Callable
 
 from bench import __version__
 from bench.data.atomic import atomic_write_json
-from bench.data.datasets import DEFAULT_CACHE, scene_hash
+from bench.data.datasets import DEFAULT_CACHE, check_folder_scene, scene_hash
 from bench.jobs import WORKER_LOST, Job, JobPlan, is_trained, result_path
 from methods.registry import available_methods, identity_config, method_config
 
@@ -32,7 +32,7 @@ if TYPE_CHECKING:
     from bench.executors.base import Executor
 
 
-def job_id_for(plan: JobPlan, config: dict[str, Any], threads: int | None = None) -> str:
+def job_id_for(plan: JobPlan, config: dict[str, Any], threads: int | None = None, scene_digest: str | None = None) -> str:
     """Stable 16-hex id of a job (see module docstring for what it covers). ``threads``: the torch threads
     the job will run with, when the executor knows it (results differ by up to ~0.003 F between thread
     counts: float sums in another order), so a row computed with another count is not silently reused;
@@ -40,14 +40,15 @@ def job_id_for(plan: JobPlan, config: dict[str, Any], threads: int | None = None
     covers this process's matrix-product code path (:func:`bench.mkl_dispatch.blas_path`, which the
     local executor's workers inherit) when it is not the default one, and a config's ``flush_denormals``
     (session 23) and ``coarse_gradient_pass`` (session 26) when on (the base id leaves them out through
-    ``id_neutral``), for the same reason."""
+    ``id_neutral``), for the same reason. ``scene_digest``: :func:`bench.data.datasets.scene_hash` of the plan's
+    scene when the caller has it already (a folder scene is hashed from its files)."""
     from bench.mkl_dispatch import blas_path
 
     key = {
         "method": plan.method,
         "config": identity_config(plan.method, config),
         "scene": plan.scene,
-        "recipe": scene_hash(plan.scene, plan.effects),
+        "recipe": scene_digest or scene_hash(plan.scene, plan.effects),
         "seed": plan.seed,
         "scale": plan.scale,
         "protocol": plan.protocol,
@@ -69,13 +70,22 @@ def resolve_jobs(plans: list[JobPlan], threads: int | None = None) -> tuple[list
     method is not implemented yet)."""
     known = set(available_methods())
     jobs, pending = [], []
+    configs: dict[str, dict[str, Any]] = {}  # many plans (seeds, scenes) share a config and a scene: resolved once each
+    scenes: dict[str, str] = {}
     for plan in plans:
         if plan.method not in known:
             pending.append(plan)
             continue
-        config = method_config(plan.method, plan.scale, dict(plan.overrides))
-        base = job_id_for(plan, config)
-        jobs.append(Job(plan, config, job_id_for(plan, config, threads) if threads is not None else base, base_id=base))
+        ckey = json.dumps([plan.method, plan.scale, plan.overrides], sort_keys=True, default=str)
+        if ckey not in configs:
+            configs[ckey] = method_config(plan.method, plan.scale, dict(plan.overrides))
+        skey = json.dumps([plan.scene, plan.effects], sort_keys=True, default=str)
+        if skey not in scenes:
+            check_folder_scene(plan.scene)  # a broken dataset folder: bad input, before any job runs
+            scenes[skey] = scene_hash(plan.scene, plan.effects)
+        config = dict(configs[ckey])
+        base = job_id_for(plan, config, scene_digest=scenes[skey])
+        jobs.append(Job(plan, config, job_id_for(plan, config, threads, scenes[skey]) if threads is not None else base, base_id=base))
     return jobs, pending
 
 
@@ -157,6 +167,10 @@ def run_jobs(
         todo = [replace(j, artifact_root=str(Path(out_dir) / "artifacts")) for j in todo]
     fresh: dict[str, dict[str, Any]] = {}
     done = failed = retried = running = 0
+    reused = len({j.job_id for j in jobs}) - len(todo)
+    if reused:
+        print(f"{reused} finished job(s) reused from {Path(out_dir) / 'jobs'}"
+              + (f"; {len(todo)} to run" if todo else "; nothing to run") + " (--force reruns them)", flush=True)
 
     def status() -> str:
         return (f"jobs [{executor.describe()}]: {done}/{len(todo)} done, {running} running, {failed} failed"
@@ -171,49 +185,50 @@ def run_jobs(
             print(f"[{time.perf_counter() - t_start:7.0f} s] {msg}", flush=True)
 
     try:
-        with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-                      TimeElapsedColumn(), disable=not show_progress or plain, transient=False) as bar:
-            overall = bar.add_task(status(), total=len(todo))
-            inner: dict[str, Any] = {}
+        if todo:  # nothing to run (every job stored): no progress bar, no "0/0 done"
+            with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                          TimeElapsedColumn(), disable=not show_progress or plain, transient=False) as bar:
+                overall = bar.add_task(status(), total=len(todo))
+                inner: dict[str, Any] = {}
 
-            def progress_for(job: Job) -> Callable[[float, str], None]:
-                task = bar.add_task(f"  {job.plan.method} | {job.plan.scene} | seed {job.plan.seed}", total=1.0)
-                inner[job.job_id] = task
+                def progress_for(job: Job) -> Callable[[float, str], None]:
+                    task = bar.add_task(f"  {job.plan.method} | {job.plan.scene} | seed {job.plan.seed}", total=1.0)
+                    inner[job.job_id] = task
 
-                def progress(frac: float, msg: str) -> None:
-                    bar.update(task, completed=frac, description=f"  {msg}")
+                    def progress(frac: float, msg: str) -> None:
+                        bar.update(task, completed=frac, description=f"  {msg}")
 
-                return progress
+                    return progress
 
-            line(f"{len(todo)} job(s) to run [{executor.describe()}]")
-            for ev in executor.run(todo, Path(cache_dir), progress_for if show_progress and not plain else None):
-                if ev.kind == "started":
-                    running += 1
-                    line(f"started {_describe(ev.job)}")
-                elif ev.kind == "status" and ev.running is not None:
-                    running = ev.running
-                elif ev.kind == "retry":
-                    retried += 1
-                    running = max(0, running - 1)
-                    bar.console.print(f"[yellow]retrying[/yellow] {_describe(ev.job)} (attempt {ev.attempt}): {ev.message}")
-                    line(f"retrying {_describe(ev.job)} (attempt {ev.attempt}): {ev.message}")
-                elif ev.kind == "done":
-                    assert ev.job is not None and ev.row is not None
-                    atomic_write_json(result_path(out_dir, ev.job), ev.row)
-                    fresh[ev.job.job_id] = ev.row
-                    done += 1
-                    running = max(0, running - 1)
-                    if ev.job.job_id in inner:
-                        bar.remove_task(inner.pop(ev.job.job_id))
-                    if ev.row["status"] != "ok":
-                        failed += 1
-                        err = ev.row.get("error") or {}
-                        bar.console.print(f"[red]job failed[/red] {_describe(ev.job)}: {err.get('type')}: {err.get('message')}")
-                    bar.advance(overall)
-                    f = (ev.row.get("metrics") or {}).get("fscore")
-                    line(f"{ev.row['status']} {_describe(ev.job)}" + (f": F {f:.3f}" if isinstance(f, float) else "")
-                         + f" ({(ev.row.get('timings') or {}).get('total', float('nan')):.0f} s); {status()}")
-                bar.update(overall, description=status())
+                line(f"{len(todo)} job(s) to run [{executor.describe()}]")
+                for ev in executor.run(todo, Path(cache_dir), progress_for if show_progress and not plain else None):
+                    if ev.kind == "started":
+                        running += 1
+                        line(f"started {_describe(ev.job)}")
+                    elif ev.kind == "status" and ev.running is not None:
+                        running = ev.running
+                    elif ev.kind == "retry":
+                        retried += 1
+                        running = max(0, running - 1)
+                        bar.console.print(f"[yellow]retrying[/yellow] {_describe(ev.job)} (attempt {ev.attempt}): {ev.message}")
+                        line(f"retrying {_describe(ev.job)} (attempt {ev.attempt}): {ev.message}")
+                    elif ev.kind == "done":
+                        assert ev.job is not None and ev.row is not None
+                        atomic_write_json(result_path(out_dir, ev.job), ev.row)
+                        fresh[ev.job.job_id] = ev.row
+                        done += 1
+                        running = max(0, running - 1)
+                        if ev.job.job_id in inner:
+                            bar.remove_task(inner.pop(ev.job.job_id))
+                        if ev.row["status"] != "ok":
+                            failed += 1
+                            err = ev.row.get("error") or {}
+                            bar.console.print(f"[red]job failed[/red] {_describe(ev.job)}: {err.get('type')}: {err.get('message')}")
+                        bar.advance(overall)
+                        f = (ev.row.get("metrics") or {}).get("fscore")
+                        line(f"{ev.row['status']} {_describe(ev.job)}" + (f": F {f:.3f}" if isinstance(f, float) else "")
+                             + f" ({(ev.row.get('timings') or {}).get('total', float('nan')):.0f} s); {status()}")
+                    bar.update(overall, description=status())
     finally:
         if own:
             executor.close()

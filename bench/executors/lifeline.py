@@ -10,6 +10,9 @@ time, so each level arms it for itself:
   (and in no other: ``bench`` itself, started by a shell or ``nohup``, must not die with its shell);
 * the workers (their parent is the fork server): :func:`exit_with_parent` in the pool initializer.
 
+The fork server and the workers ignore SIGINT (a terminal's Ctrl-C reaches the whole process group):
+``bench`` catches it and terminates them, and none of them prints a ``KeyboardInterrupt`` traceback.
+
 When ``bench`` dies the fork server is killed, which kills the workers; the resource tracker then reads
 EOF from its last writer and exits by itself. No-op outside Linux.
 """
@@ -40,6 +43,11 @@ def exit_with_parent(sig: int = signal.SIGKILL) -> None:
         os._exit(1)
 
 
+def ignore_interrupts() -> None:
+    """Ignore SIGINT in this (worker) process: Ctrl-C is ``bench``'s to handle; it terminates its workers."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def mark_parent() -> None:
     """Record this process as the one whose death must take the fork server (and so the pool) with it."""
     os.environ[ENV] = str(os.getpid())
@@ -47,3 +55,6 @@ def mark_parent() -> None:
 
 if os.environ.get(ENV) == str(os.getppid()):  # imported by the fork server bench started: arm it
     exit_with_parent()
+    # Ctrl-C reaches the whole process group; bench stops the workers itself. The fork server ignores SIGINT once
+    # its preload is imported: ignore it from here, so a Ctrl-C while it imports torch prints no traceback.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
