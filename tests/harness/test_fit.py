@@ -71,4 +71,8 @@ def test_fit_bad_folder_is_one_clear_error(tmp_path, capsys):
     assert main(["fit", "monosdf", str(folder), "--scale", "tiny", "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "image number 1 is missing" in err[0]
+    assert not (tmp_path / "o").exists()  # nothing left behind
+    assert main(["fit", "mono_sdf", str(folder), "--out", str(tmp_path / "o")]) == 2  # not a method: the known ones listed
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "'mono_sdf': not a known method (known: " in err[0] and "monosdf" in err[0]
     assert main(["fit", "monosdf", str(tmp_path / "nowhere"), "--out", str(tmp_path / "o")]) == 2
