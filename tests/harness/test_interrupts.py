@@ -18,9 +18,11 @@ REPO = Path(__file__).resolve().parents[2]
 
 
 def _bench(*args: str, **kw) -> subprocess.Popen:
-    """``bench ARGS`` as the console script runs it (``main()`` without argv), in its own process group."""
+    """``bench ARGS`` as the console script runs it (``main()`` without argv), in its own process group, with
+    SIGINT's default disposition, as from a terminal (a test run in the background inherits it ignored)."""
     return subprocess.Popen([sys.executable, "-m", "bench.cli", *args], cwd=REPO, text=True, start_new_session=True,
-                            env={**os.environ, "PYTHONPATH": str(REPO)}, **kw)
+                            env={**os.environ, "PYTHONPATH": str(REPO)},
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL), **kw)
 
 
 def _interrupt_when(out: Path, marker: str, delay_s: float = 0.0) -> tuple[int, str, str]:
