@@ -172,6 +172,11 @@ def run_jobs(
         print(f"{reused} finished job(s) reused from {Path(out_dir) / 'jobs'}"
               + (f"; {len(todo)} to run" if todo else "; nothing to run") + " (--force reruns them)", flush=True)
 
+    if not todo:  # every job stored: no progress bar, no "0/0 done"
+        if own:
+            executor.close()
+        return _stored_rows(jobs, {}, out_dir)
+
     def status() -> str:
         return (f"jobs [{executor.describe()}]: {done}/{len(todo)} done, {running} running, {failed} failed"
                 + (f", {retried} retried" if retried else ""))
@@ -185,63 +190,60 @@ def run_jobs(
             print(f"[{time.perf_counter() - t_start:7.0f} s] {msg}", flush=True)
 
     try:
-        if todo:  # nothing to run (every job stored): no progress bar, no "0/0 done"
-            with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-                          TimeElapsedColumn(), disable=not show_progress or plain, transient=False) as bar:
-                overall = bar.add_task(status(), total=len(todo))
-                inner: dict[str, Any] = {}
+        with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                      TimeElapsedColumn(), disable=not show_progress or plain, transient=False) as bar:
+            overall = bar.add_task(status(), total=len(todo))
+            inner: dict[str, Any] = {}
 
-                def progress_for(job: Job) -> Callable[[float, str], None]:
-                    task = bar.add_task(f"  {job.plan.method} | {job.plan.scene} | seed {job.plan.seed}", total=1.0)
-                    inner[job.job_id] = task
+            def progress_for(job: Job) -> Callable[[float, str], None]:
+                task = bar.add_task(f"  {job.plan.method} | {job.plan.scene} | seed {job.plan.seed}", total=1.0)
+                inner[job.job_id] = task
 
-                    def progress(frac: float, msg: str) -> None:
-                        bar.update(task, completed=frac, description=f"  {msg}")
+                def progress(frac: float, msg: str) -> None:
+                    bar.update(task, completed=frac, description=f"  {msg}")
 
-                    return progress
+                return progress
 
-                line(f"{len(todo)} job(s) to run [{executor.describe()}]")
-                for ev in executor.run(todo, Path(cache_dir), progress_for if show_progress and not plain else None):
-                    if ev.kind == "started":
-                        running += 1
-                        line(f"started {_describe(ev.job)}")
-                    elif ev.kind == "status" and ev.running is not None:
-                        running = ev.running
-                    elif ev.kind == "retry":
-                        retried += 1
-                        running = max(0, running - 1)
-                        bar.console.print(f"[yellow]retrying[/yellow] {_describe(ev.job)} (attempt {ev.attempt}): {ev.message}")
-                        line(f"retrying {_describe(ev.job)} (attempt {ev.attempt}): {ev.message}")
-                    elif ev.kind == "done":
-                        assert ev.job is not None and ev.row is not None
-                        atomic_write_json(result_path(out_dir, ev.job), ev.row)
-                        fresh[ev.job.job_id] = ev.row
-                        done += 1
-                        running = max(0, running - 1)
-                        if ev.job.job_id in inner:
-                            bar.remove_task(inner.pop(ev.job.job_id))
-                        if ev.row["status"] != "ok":
-                            failed += 1
-                            err = ev.row.get("error") or {}
-                            bar.console.print(f"[red]job failed[/red] {_describe(ev.job)}: {err.get('type')}: {err.get('message')}")
-                        bar.advance(overall)
-                        f = (ev.row.get("metrics") or {}).get("fscore")
-                        line(f"{ev.row['status']} {_describe(ev.job)}" + (f": F {f:.3f}" if isinstance(f, float) else "")
-                             + f" ({(ev.row.get('timings') or {}).get('total', float('nan')):.0f} s); {status()}")
-                    bar.update(overall, description=status())
+            line(f"{len(todo)} job(s) to run [{executor.describe()}]")
+            for ev in executor.run(todo, Path(cache_dir), progress_for if show_progress and not plain else None):
+                if ev.kind == "started":
+                    running += 1
+                    line(f"started {_describe(ev.job)}")
+                elif ev.kind == "status" and ev.running is not None:
+                    running = ev.running
+                elif ev.kind == "retry":
+                    retried += 1
+                    running = max(0, running - 1)
+                    bar.console.print(f"[yellow]retrying[/yellow] {_describe(ev.job)} (attempt {ev.attempt}): {ev.message}")
+                    line(f"retrying {_describe(ev.job)} (attempt {ev.attempt}): {ev.message}")
+                elif ev.kind == "done":
+                    assert ev.job is not None and ev.row is not None
+                    atomic_write_json(result_path(out_dir, ev.job), ev.row)
+                    fresh[ev.job.job_id] = ev.row
+                    done += 1
+                    running = max(0, running - 1)
+                    if ev.job.job_id in inner:
+                        bar.remove_task(inner.pop(ev.job.job_id))
+                    if ev.row["status"] != "ok":
+                        failed += 1
+                        err = ev.row.get("error") or {}
+                        bar.console.print(f"[red]job failed[/red] {_describe(ev.job)}: {err.get('type')}: {err.get('message')}")
+                    bar.advance(overall)
+                    f = (ev.row.get("metrics") or {}).get("fscore")
+                    line(f"{ev.row['status']} {_describe(ev.job)}" + (f": F {f:.3f}" if isinstance(f, float) else "")
+                         + f" ({(ev.row.get('timings') or {}).get('total', float('nan')):.0f} s); {status()}")
+                bar.update(overall, description=status())
     finally:
         if own:
             executor.close()
-    if (not show_progress or plain) and todo:
+    if not show_progress or plain:
         print(status())
-    rows = []
-    for j in jobs:
-        row = fresh.get(j.job_id)
-        if row is None:
-            path = result_path(out_dir, j)
-            row = json.loads(path.read_text())
-        rows.append(row)
-    return rows
+    return _stored_rows(jobs, fresh, out_dir)
+
+
+def _stored_rows(jobs: list[Job], fresh: dict[str, dict[str, Any]], out_dir: Path) -> list[dict[str, Any]]:
+    """The row of every job, in job order: this run's (``fresh``) or the one stored in ``out_dir``."""
+    return [fresh.get(j.job_id) or json.loads(result_path(out_dir, j).read_text()) for j in jobs]
 
 
 def _describe(job: Job | None) -> str:
