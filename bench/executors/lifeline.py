@@ -11,7 +11,8 @@ time, so each level arms it for itself:
 * the workers (their parent is the fork server): :func:`exit_with_parent` in the pool initializer.
 
 The fork server and the workers ignore SIGINT (a terminal's Ctrl-C reaches the whole process group):
-``bench`` catches it and terminates them, and none of them prints a ``KeyboardInterrupt`` traceback.
+``bench`` catches it and terminates them, and none of them prints a ``KeyboardInterrupt`` traceback. A Dask
+``LocalCluster``'s worker processes are started under :func:`interrupts_ignored` for the same reason.
 
 When ``bench`` dies the fork server is killed, which kills the workers; the resource tracker then reads
 EOF from its last writer and exits by itself. No-op outside Linux.
@@ -19,9 +20,12 @@ EOF from its last writer and exits by itself. No-op outside Linux.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import sys
+import threading
+from typing import Iterator
 
 ENV = "BENCH_LIFELINE_PID"
 FORKSERVER_PRELOAD = [__name__]
@@ -46,6 +50,20 @@ def exit_with_parent(sig: int = signal.SIGKILL) -> None:
 def ignore_interrupts() -> None:
     """Ignore SIGINT in this (worker) process: Ctrl-C is ``bench``'s to handle; it terminates its workers."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+@contextlib.contextmanager
+def interrupts_ignored() -> Iterator[None]:
+    """Ignore SIGINT in this process while the block starts worker processes, which inherit the ignored
+    disposition (a handler would not survive their ``exec``); restored after. The main thread only."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def mark_parent() -> None:

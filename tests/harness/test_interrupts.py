@@ -25,11 +25,11 @@ def _bench(*args: str, **kw) -> subprocess.Popen:
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL), **kw)
 
 
-def _interrupt_when(out: Path, marker: str, delay_s: float = 0.0) -> tuple[int, str, str]:
-    """Run ``bench run`` (the ablation table at tiny scale) into ``out``; SIGINT its process group ``delay_s``
-    after ``marker`` appears on its stdout; its (exit status, stdout, stderr)."""
-    p = _bench("run", "--table", "ablation", "--scale", "tiny", "--workers", "2", "--out", str(out),
-               stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+def _interrupt_when(out: Path, marker: str, delay_s: float, executor: str) -> tuple[int, str, str]:
+    """Run ``bench run`` (the ablation table at tiny scale, every job anew) on ``executor`` into ``out``; SIGINT its
+    process group ``delay_s`` after ``marker`` appears on its stdout; its (exit status, stdout, stderr)."""
+    p = _bench("run", "--table", "ablation", "--scale", "tiny", "--executor", executor, "--workers", "2", "--force",
+               "--out", str(out), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     assert p.stdout is not None and p.stderr is not None
     lines = []
     try:
@@ -47,12 +47,13 @@ def _interrupt_when(out: Path, marker: str, delay_s: float = 0.0) -> tuple[int, 
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("marker,delay_s", [
-    ("job(s) to run", 0.0),  # the fork server is importing torch, the workers are starting
-    ("started", 3.0),  # jobs are training
-], ids=["as-workers-start", "mid-run"])
-def test_ctrl_c_at_any_moment_ends_with_one_line_and_no_empty_folder(tmp_path: Path, marker: str, delay_s: float):
-    code, out, err = _interrupt_when(tmp_path / "runs", marker, delay_s)
+@pytest.mark.parametrize("marker,delay_s,executor", [
+    ("job(s) to run", 0.0, "local"),  # the fork server is importing torch, the workers are starting
+    ("started", 3.0, "local"),  # jobs are training
+    ("job(s) to run", 10.0, "dask"),  # a local Dask cluster's workers are training
+], ids=["as-workers-start", "mid-run", "dask-mid-run"])
+def test_ctrl_c_at_any_moment_ends_with_one_line_and_no_empty_folder(tmp_path: Path, marker: str, delay_s: float, executor: str):
+    code, out, err = _interrupt_when(tmp_path / "runs", marker, delay_s, executor)
     assert marker in out, out
     assert code == 130, err
     assert err.strip().splitlines() == ["interrupted (Ctrl-C): running jobs stopped; finished results are kept"], err
