@@ -467,6 +467,15 @@ def _interrupt_on_sigterm() -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    try:  # Ctrl-C while the command starts (imports, parsing) ends as quietly as during its work
+        return _run_command(argv)
+    except KeyboardInterrupt as exc:
+        print(f"interrupted ({str(exc) or 'Ctrl-C'}): running jobs stopped; finished results are kept", file=sys.stderr)
+        return 130
+
+
+def _run_command(argv: list[str] | None) -> int:
+    """Parse ``argv`` and run the command; bad input and a closed output pipe as exit codes (module docstring)."""
     if argv is None:  # the console script, not a test calling main([...]): MKL's Intel (AVX-512 / AVX2) path on a non-Intel CPU
         from bench.mkl_dispatch import reexec_with_mkl_shim
 
@@ -489,9 +498,6 @@ def main(argv: list[str] | None = None) -> int:
     except FileExistsError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt as exc:
-        print(f"interrupted ({str(exc) or 'Ctrl-C'}): running jobs stopped; finished results are kept", file=sys.stderr)
-        return 130
 
 
 if __name__ == "__main__":

@@ -25,6 +25,8 @@ import os
 import signal
 import sys
 import threading
+import traceback
+from types import TracebackType
 from typing import Iterator
 
 ENV = "BENCH_LIFELINE_PID"
@@ -71,8 +73,18 @@ def mark_parent() -> None:
     os.environ[ENV] = str(os.getpid())
 
 
+def _quiet_when_the_pool_is_gone(exc_type: type[BaseException], exc: BaseException, tb: TracebackType | None) -> None:
+    """``sys.excepthook`` of the fork server's children: a worker forked while ``bench`` shuts its pool down (Ctrl-C as
+    the workers start) finds the pool's semaphore already removed (``FileNotFoundError`` while unpickling it) and
+    exits without a traceback; any other error is printed as usual."""
+    if issubclass(exc_type, FileNotFoundError) and any(f.f_code.co_name == "__setstate__" for f, _ in traceback.walk_tb(tb)):
+        return
+    sys.__excepthook__(exc_type, exc, tb)
+
+
 if os.environ.get(ENV) == str(os.getppid()):  # imported by the fork server bench started: arm it
     exit_with_parent()
     # Ctrl-C reaches the whole process group; bench stops the workers itself. The fork server ignores SIGINT once
     # its preload is imported: ignore it from here, so a Ctrl-C while it imports torch prints no traceback.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    sys.excepthook = _quiet_when_the_pool_is_gone  # inherited by the workers it forks
