@@ -114,6 +114,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from bench.report import build_table, render_report, write_table_outputs
     from bench.results_io import collect_results
     from bench.runner import plan_index, run_jobs, unique_jobs
+    from bench.scales import is_smoke, smoke_note
     from methods.registry import available_methods
 
     out = Path(args.out) / args.scale
@@ -127,6 +128,8 @@ def cmd_run(args: argparse.Namespace) -> int:
               + (f"; pending (not implemented yet): {', '.join(pending_methods)}" if pending_methods else ""))
         specs.append(spec)
         jobs_by_table[spec.name] = jobs  # by the spec's name: a table given by path is named inside its file
+    if is_smoke(args.scale):
+        print(smoke_note(args.scale))
     names = list(jobs_by_table)
     every = [j for name in names for j in jobs_by_table[name]]
     todo = unique_jobs(every)

@@ -202,6 +202,7 @@ def test_failed_job_makes_run_exit_1_and_plain_log_has_a_line_per_job(tmp_path, 
     captured = capsys.readouterr()
     assert code == 1
     assert "started Oracle" in captured.out and "failed Oracle" in captured.out
+    assert "Scale 'tiny' is a smoke test" in captured.out.split("started Oracle")[0]  # said before the run, not only in the table
     assert "jobs failed" in captured.err
     assert (tmp_path / "tiny" / "ablation.md").exists()
 
