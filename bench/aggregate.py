@@ -19,7 +19,8 @@ A cell with fewer than ``n_expected`` values keeps those counts, and the markdow
 fewer jobs.
 
 Convergence: a spec with ``convergence`` judges every trained row (:func:`judge_rows`,
-:mod:`bench.convergence`); the tidy CSV has the verdict in ``converged``.
+:mod:`bench.convergence`); the tidy CSV has the verdict in ``converged`` (empty at a smoke-test scale,
+:mod:`bench.scales`).
 
 Also per table: the stage timings (:func:`timing_frame`) and the accuracy along the schedule
 (:func:`curve_table`).
@@ -34,6 +35,7 @@ import numpy as np
 import pandas as pd
 
 from bench.convergence import RowConvergence, judge_row
+from bench.scales import is_smoke
 from bench.table_report import Cell, TableReport
 from bench.table_spec import TableSpec, resolve
 
@@ -153,11 +155,15 @@ def _converged_value(v: RowConvergence | None) -> bool | None:
     return None if v is None or not v.judged else v.converged
 
 
-def judge_rows(spec: TableSpec, jobs: pd.DataFrame) -> dict[tuple[str, str], RowConvergence]:
+def judge_rows(spec: TableSpec, jobs: pd.DataFrame, scale: str) -> dict[tuple[str, str], RowConvergence]:
     """(row label, group id) -> the row's convergence verdict (:func:`bench.convergence.judge_row`) over
-    its successful jobs; empty when the spec has no ``convergence``."""
+    its successful jobs; empty when the spec has no ``convergence``; no verdict (``smoke``) at a
+    smoke-test scale (:mod:`bench.scales`)."""
     if spec.convergence is None:
         return {}
+    if is_smoke(scale):
+        return {(r.label, g.id): RowConvergence(spec.convergence, 0, 0, 0, math.nan, smoke=True)
+                for r in spec.rows for g in spec.groups}
     ok = jobs[jobs["status"] == "ok"]
     return {(r.label, g.id): judge_row(ok[(ok["row"] == r.label) & (ok["gid"] == g.id)][["seed", "curve", "config"]]
                                        .itertuples(index=False, name=None), spec.convergence)

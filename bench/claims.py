@@ -7,18 +7,20 @@ if every comparison goes its way by more than that spread, and NOT HELD only if 
 more than that spread; otherwise it is ``UNDECIDED (within the seed spread: ...; as measured: ...)``.
 Measured reason: the Table 3 runs of two rasteriser kernels that differ only in float
 rounding gave every claim of that table opposite verdicts, every difference inside the spread (Gaussian
-densification is chaotic to rounding; docs/studies/gaussian-rasteriser-and-llff-runs.md). With one seed the spread is unknown and the
-verdict is the measured one.
+densification is chaotic to rounding; docs/studies/gaussian-rasteriser-and-llff-runs.md). With one seed the spread is unknown, so no
+difference can be shown to exceed it: ``UNDECIDED (spread unknown, one seed: ...)``.
 
 Convergence: a claim comparing a row that has not converged (the verdicts of
 :func:`bench.aggregate.judge_rows`, :mod:`bench.convergence`) is ``UNDECIDED (not converged: ...)``:
-a row that has not converged is not a result.
+a row that has not converged is not a result. At a smoke-test scale (:mod:`bench.scales`) every claim is
+``UNDECIDED (smoke test at scale ...)``.
 """
 
 from __future__ import annotations
 
 import math
 
+from bench.scales import is_smoke
 from bench.table_report import ClaimResult, TableReport
 from bench.table_spec import ClaimSpec, TableSpec
 
@@ -66,6 +68,7 @@ def check_claim(report: TableReport, claim: ClaimSpec) -> ClaimResult:
     details: list[str] = []
     holds, partial = True, False
     unresolved: list[str] = []  # comparisons whose difference does not exceed the combined spread
+    one_seed: list[str] = []  # comparisons with a one-seed cell: the spread is unknown
     clear_miss = False  # a comparison against the claim by more than the combined spread
     for g, ra, ma, rb, mb, better, strict in pairs:
         ca, cb = report.cells[(ra, g, ma)], report.cells[(rb, g, mb)]
@@ -84,6 +87,7 @@ def check_claim(report: TableReport, claim: ClaimSpec) -> ClaimResult:
             clear_miss |= beyond and not ok
             sp = f"|diff| {_fmt(abs(ca.mean - cb.mean))} {clear} the combined spread {_fmt(spread)}"
         else:
+            one_seed.append(f"{ra} {ma} vs {rb} {mb} [{g}]")
             sp = "spread unknown (one seed)"
         rel = (">" if better == "higher" else "<") + ("" if strict else "=") + (f" (by more than {_fmt(margin)})" if margin else "")
         details.append(
@@ -91,12 +95,17 @@ def check_claim(report: TableReport, claim: ClaimSpec) -> ClaimResult:
             f"{rel} {rb} {mb} = {_fmt(cb.mean)} ± {_fmt(cb.std)} (n={cb.n}, {cb.n_seeds} seeds): "
             f"{'yes' if ok else 'NO'}; {sp}")
     unconverged = sorted({f"{r} [{g}]" for g, ra, _, rb, _, _, _ in pairs for r in (ra, rb) if report.not_converged(r, g)})
+    measured = f"as measured: {'HELD' if holds else 'NOT HELD'}"
     if missing:
         verdict = f"UNDECIDED (missing rows: {'; '.join(missing)})"
+    elif is_smoke(report.scale):
+        verdict = f"UNDECIDED (smoke test at scale {report.scale!r}: not a result; {measured})"
     elif unconverged:
-        verdict = f"UNDECIDED (not converged: {'; '.join(unconverged)}; as measured: {'HELD' if holds else 'NOT HELD'})"
-    elif unresolved and not clear_miss:
-        verdict = f"UNDECIDED (within the seed spread: {'; '.join(unresolved)}; as measured: {'HELD' if holds else 'NOT HELD'})"
+        verdict = f"UNDECIDED (not converged: {'; '.join(unconverged)}; {measured})"
+    elif (unresolved or one_seed) and not clear_miss:
+        why = ([f"within the seed spread: {'; '.join(unresolved)}"] if unresolved else []) \
+            + ([f"spread unknown, one seed: {'; '.join(one_seed)}"] if one_seed else [])
+        verdict = f"UNDECIDED ({'; '.join(why)}; {measured})"
     else:
         verdict = "HELD" if holds else "NOT HELD"
     paper_vals = [(_paper_value(spec, ra, g, ma), _paper_value(spec, rb, g, mb), better, strict)

@@ -20,18 +20,22 @@
 
 Exit status: 0 everything ran; 1 (``bench run``) the tables were written but some job failed; 2 bad
 input (a missing file, a bad recipe, an unknown table or scene, an unwritable ``--out``, filters that
-match no job): one line naming the file and the problem; 130 interrupted (Ctrl-C, SIGTERM).
+match no job): one line naming the file and the problem; 130 interrupted (Ctrl-C, SIGTERM); 141 the
+reader of the output closed the pipe (``bench list | head``). Never a traceback.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 from pathlib import Path
+from typing import Iterator
 
 from bench.data.errors import BenchInputError
 
 EXIT_JOBS_FAILED = 1
+EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE, what a shell tool killed by a closed pipe returns
 REPO_ROOT = Path(__file__).resolve().parent.parent
 SCENES_DIR = REPO_ROOT / "configs" / "scenes"
 DEFAULT_OUT = REPO_ROOT / "results" / "runs"
@@ -110,6 +114,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from bench.report import build_table, render_report, write_table_outputs
     from bench.results_io import collect_results
     from bench.runner import plan_index, run_jobs, unique_jobs
+    from bench.scales import is_smoke, smoke_note
     from methods.registry import available_methods
 
     out = Path(args.out) / args.scale
@@ -123,16 +128,17 @@ def cmd_run(args: argparse.Namespace) -> int:
               + (f"; pending (not implemented yet): {', '.join(pending_methods)}" if pending_methods else ""))
         specs.append(spec)
         jobs_by_table[spec.name] = jobs  # by the spec's name: a table given by path is named inside its file
+    if is_smoke(args.scale):
+        print(smoke_note(args.scale))
     names = list(jobs_by_table)
     every = [j for name in names for j in jobs_by_table[name]]
     todo = unique_jobs(every)
     if not todo:
         raise BenchInputError("bench run", f"nothing to run: no implemented job in table(s) {names} at scale {args.scale!r}"
                               " with these filters")
-    check_writable(out)
     if len(names) > 1:
         print(f"{len(todo)} distinct jobs for {len(every)} table cells x seeds ({len(every) - len(todo)} shared between tables)")
-    with _executor(args) as executor:
+    with output_folder(out), _executor(args) as executor:
         rows = run_jobs(todo, out, force=args.force, show_progress=not args.quiet, executor=executor,
                         keep_artifacts=not args.no_artifacts)
     failed = [r for r in rows if r.get("status") != "ok"]
@@ -149,7 +155,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     report = build_table(specs[0], df, args.scale, available_methods(), plans=plans_by_table[specs[0].name])
     paths = write_table_outputs(report, out)
     _print_table_summary(paths["md"])
-    print(f"wrote {paths['csv']}, {paths['md']}, {paths['png']}")
+    print(f"wrote {', '.join(str(p) for p in paths.values())}")
     return status
 
 
@@ -158,12 +164,35 @@ def check_writable(out: Path) -> None:
     no space for even a probe file)."""
     import tempfile
 
+    if out.exists() and not out.is_dir():
+        raise BenchInputError(str(out), "is a file, not a folder (--out names the output folder)")
     try:
         out.mkdir(parents=True, exist_ok=True)
         with tempfile.NamedTemporaryFile(dir=out, prefix=".probe-"):
             pass
     except OSError as exc:
         raise BenchInputError(str(out), f"output folder is not writable: {exc.strerror or exc}") from None
+
+
+@contextlib.contextmanager
+def output_folder(out: Path) -> Iterator[None]:
+    """Create ``out`` (:func:`check_writable`) for the block; if the block is interrupted or fails, remove the
+    empty folders left in ``out`` and ``out`` itself (with the parents this created) when empty: a run stopped
+    before its first result leaves no empty folder behind. Folders holding any file are kept."""
+    created = [p for p in (out, *out.parents) if not p.exists()]
+    check_writable(out)
+    try:
+        yield
+    except BaseException:
+        for folder in sorted((p for p in out.rglob("*") if p.is_dir()), key=lambda p: len(p.parts), reverse=True):
+            with contextlib.suppress(OSError):
+                folder.rmdir()  # only if empty
+        for folder in created:  # deepest first
+            try:
+                folder.rmdir()
+            except OSError:
+                break
+        raise
 
 
 def _workers(args: argparse.Namespace) -> int | None:
@@ -312,7 +341,8 @@ def cmd_fit(args: argparse.Namespace) -> int:
     if args.seed < 0:
         raise BenchInputError("--seed", f"must be a non-negative integer, got {args.seed}")
     out = Path(args.out) if args.out else DEFAULT_OUT / "fit" / f"{args.method}-{Path(args.path).resolve().name}-{args.scale}"
-    fit_folder(args.method, Path(args.path), args.scale, parse_overrides(args.set), out, seed=args.seed, factor=args.factor)
+    with output_folder(out):  # a bad folder or method leaves no empty output folder behind
+        fit_folder(args.method, Path(args.path), args.scale, parse_overrides(args.set), out, seed=args.seed, factor=args.factor)
     return 0
 
 
@@ -440,6 +470,15 @@ def _interrupt_on_sigterm() -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    try:  # Ctrl-C while the command starts (imports, parsing) ends as quietly as during its work
+        return _run_command(argv)
+    except KeyboardInterrupt as exc:
+        print(f"interrupted ({str(exc) or 'Ctrl-C'}): running jobs stopped; finished results are kept", file=sys.stderr)
+        return 130
+
+
+def _run_command(argv: list[str] | None) -> int:
+    """Parse ``argv`` and run the command; bad input and a closed output pipe as exit codes (module docstring)."""
     if argv is None:  # the console script, not a test calling main([...]): MKL's Intel (AVX-512 / AVX2) path on a non-Intel CPU
         from bench.mkl_dispatch import reexec_with_mkl_shim
 
@@ -448,16 +487,20 @@ def main(argv: list[str] | None = None) -> int:
     if argv is None:
         _interrupt_on_sigterm()
     try:
-        return int(args.func(args) or 0)
+        status = int(args.func(args) or 0)
+        sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit
+        return status
+    except BrokenPipeError:  # `bench list | head`: the reader has what it wanted
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error when Python flushes at exit
+        return EXIT_BROKEN_PIPE
     except BenchInputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except FileExistsError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt as exc:
-        print(f"interrupted ({exc or 'Ctrl-C'}): running jobs stopped; finished results are kept", file=sys.stderr)
-        return 130
 
 
 if __name__ == "__main__":

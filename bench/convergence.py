@@ -80,11 +80,12 @@ class RowConvergence:
     n_flat: int
     n_no_drop: int
     seed_std: float
+    smoke: bool = False  # a smoke-test scale (bench.scales): the row is not judged at all
 
     @property
     def judged(self) -> bool:
-        """False for rows without a trained run (fusion references, rows with no results)."""
-        return self.n_runs > 0
+        """False for rows without a trained run (fusion references, rows with no results) and at a smoke-test scale."""
+        return self.n_runs > 0 and not self.smoke
 
     @property
     def converged(self) -> bool:
@@ -103,7 +104,10 @@ class RowConvergence:
         return out
 
     def label(self) -> str:
-        """Short text for a table cell: ``yes``, ``yes (one seed)``, ``NO (flat 2/6, ...)`` or ``-``."""
+        """Short text for a table cell: ``yes``, ``yes (one seed)``, ``NO (flat 2/6, ...)``, ``-`` or
+        ``n/a (smoke test)``."""
+        if self.smoke:
+            return "n/a (smoke test)"
         if not self.judged:
             return "-"
         if self.converged:

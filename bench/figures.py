@@ -30,6 +30,7 @@ import numpy as np
 import pandas as pd
 
 from bench.aggregate import curve_table
+from bench.scales import is_smoke
 from bench.table_report import TableReport
 from metrics.camera import backproject
 
@@ -284,7 +285,8 @@ def plot_accuracy_vs_time(report: TableReport, curves: pd.DataFrame | None = Non
                         label=None if line else label)
         ax.set_xlabel("wall time [s]")
         ax.set_ylabel(f"{main.label} ({'higher' if main.direction == 'higher' else 'lower'} is better)")
-        ax.set_title(f"{g.label}: {main.label} vs time ({report.scale})", fontsize=9)
+        smoke = ", smoke test: not a result" if is_smoke(report.scale) else ""
+        ax.set_title(f"{g.label}: {main.label} vs time ({report.scale}{smoke})", fontsize=9)
         ax.grid(alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=7)

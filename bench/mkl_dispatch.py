@@ -31,6 +31,7 @@ a CPU with neither AVX-512 nor AVX2 + FMA, off Linux, or without a C compiler (a
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import shutil
@@ -114,8 +115,10 @@ def build_shim(directory: Path | None = None) -> Path | None:
     return target
 
 
+@functools.cache
 def shim_loaded() -> bool:
-    """Whether the shim is mapped into this process (read from ``/proc/self/maps``, not the environment)."""
+    """Whether the shim is mapped into this process (read from ``/proc/self/maps``, not the environment; once: it
+    is preloaded at the start of a process or not at all, and planning asks for every job)."""
     try:
         return SHIM_STEM in Path("/proc/self/maps").read_text()
     except OSError:

@@ -281,7 +281,7 @@ def run_regress(args: argparse.Namespace, executor: Executor, tables_dir: Path =
         if args.update_reference:
             doc = make_reference(spec, report, versions(), rows=rows)
             atomic_write_json(ref_path, doc)
-            print(f"table {spec.name}: stored the reference {ref_path}")
+            print(f"table {spec.name}: stored the reference {ref_path} (the fresh table in {out})")
             if reference is not None:
                 findings = compare(reference, summarise(spec, report, rows))
                 changed = [f for f in findings if f.verdict not in ("ok",)]
@@ -296,6 +296,8 @@ def run_regress(args: argparse.Namespace, executor: Executor, tables_dir: Path =
                           {"table": spec.name, "scale": args.scale, "passed": result.passed,
                            "reference": str(ref_path), "findings": [asdict(f) for f in result.findings]})
         print(md)
+        print(f"table {spec.name}: {'passed' if result.passed else 'REGRESSION'}; report {out / f'regress_{spec.name}.md'} "
+              f"(and .json), the fresh table beside it in {out}")
         if not result.passed:
             failed_tables.append(spec.name)
     if failed_tables:

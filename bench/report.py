@@ -18,6 +18,7 @@ from bench.aggregate import PlanIndex, curve_table, judge_rows, select_by_id, ta
 from bench.claims import check_claim
 from bench.data.atomic import atomic_write_many, atomic_write_text
 from bench.results_io import empty_results
+from bench.scales import is_smoke, smoke_note
 from bench.table_markdown import to_markdown
 from bench.table_report import TableReport
 from bench.table_spec import TableSpec
@@ -44,7 +45,7 @@ def report_from_jobs(spec: TableSpec, scale: str, jobs: pd.DataFrame, available_
     avail = None if available_methods is None else set(available_methods)
     unavailable = {r.method for r in spec.rows if r.method is not None and avail is not None and r.method not in avail}
     cells = table_cells(spec, jobs, scale, unavailable)
-    convergence = judge_rows(spec, jobs)
+    convergence = judge_rows(spec, jobs, scale)
     report = TableReport(spec, scale, cells, jobs, tidy_frame(spec, cells, convergence), timing_frame(spec, jobs), [], unavailable,
                          n_unmatched, n_superseded, convergence)
     report.claims = [check_claim(report, c) for c in spec.claims]
@@ -97,6 +98,8 @@ def render_report(specs: Sequence[TableSpec], df: pd.DataFrame, scale: str, out_
     avail = None if available_methods is None else set(available_methods)
     reports = [build_table(s, df, scale, avail, plans=plans[s.name]) for s in specs]
     sections = [f"# {title}", "", f"Scale: `{scale}`. Jobs read: {len(df)}.", ""]
+    if is_smoke(scale):
+        sections += [f"**Smoke test.** {smoke_note(scale)}", ""]
     if len(df):
         scales = sorted({str(v) for v in df["scale"].unique()})
         versions = sorted({f"{k} {v}" for vs in df["versions"] for k, v in vs.items()})

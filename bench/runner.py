@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any, Callable
 
 from bench import __version__
 from bench.data.atomic import atomic_write_json
-from bench.data.datasets import DEFAULT_CACHE, scene_hash
+from bench.data.datasets import DEFAULT_CACHE, check_folder_scene, scene_hash
 from bench.jobs import WORKER_LOST, Job, JobPlan, is_trained, result_path
 from methods.registry import available_methods, identity_config, method_config
 
@@ -32,7 +32,7 @@ if TYPE_CHECKING:
     from bench.executors.base import Executor
 
 
-def job_id_for(plan: JobPlan, config: dict[str, Any], threads: int | None = None) -> str:
+def job_id_for(plan: JobPlan, config: dict[str, Any], threads: int | None = None, scene_digest: str | None = None) -> str:
     """Stable 16-hex id of a job (see module docstring for what it covers). ``threads``: the torch threads
     the job will run with, when the executor knows it (results differ by up to ~0.003 F between thread
     counts: float sums in another order), so a row computed with another count is not silently reused;
@@ -40,14 +40,15 @@ def job_id_for(plan: JobPlan, config: dict[str, Any], threads: int | None = None
     covers this process's matrix-product code path (:func:`bench.mkl_dispatch.blas_path`, which the
     local executor's workers inherit) when it is not the default one, and a config's ``flush_denormals``
     and ``coarse_gradient_pass`` when on (the base id leaves them out through
-    ``id_neutral``), for the same reason."""
+    ``id_neutral``), for the same reason. ``scene_digest``: :func:`bench.data.datasets.scene_hash` of the plan's
+    scene when the caller has it already (a folder scene is hashed from its files)."""
     from bench.mkl_dispatch import blas_path
 
     key = {
         "method": plan.method,
         "config": identity_config(plan.method, config),
         "scene": plan.scene,
-        "recipe": scene_hash(plan.scene, plan.effects),
+        "recipe": scene_digest or scene_hash(plan.scene, plan.effects),
         "seed": plan.seed,
         "scale": plan.scale,
         "protocol": plan.protocol,
@@ -69,13 +70,22 @@ def resolve_jobs(plans: list[JobPlan], threads: int | None = None) -> tuple[list
     method is not implemented yet)."""
     known = set(available_methods())
     jobs, pending = [], []
+    configs: dict[str, dict[str, Any]] = {}  # many plans (seeds, scenes) share a config and a scene: resolved once each
+    scenes: dict[str, str] = {}
     for plan in plans:
         if plan.method not in known:
             pending.append(plan)
             continue
-        config = method_config(plan.method, plan.scale, dict(plan.overrides))
-        base = job_id_for(plan, config)
-        jobs.append(Job(plan, config, job_id_for(plan, config, threads) if threads is not None else base, base_id=base))
+        ckey = json.dumps([plan.method, plan.scale, plan.overrides], sort_keys=True, default=str)
+        if ckey not in configs:
+            configs[ckey] = method_config(plan.method, plan.scale, dict(plan.overrides))
+        skey = json.dumps([plan.scene, plan.effects], sort_keys=True, default=str)
+        if skey not in scenes:
+            check_folder_scene(plan.scene)  # a broken dataset folder: bad input, before any job runs
+            scenes[skey] = scene_hash(plan.scene, plan.effects)
+        config = dict(configs[ckey])
+        base = job_id_for(plan, config, scene_digest=scenes[skey])
+        jobs.append(Job(plan, config, job_id_for(plan, config, threads, scenes[skey]) if threads is not None else base, base_id=base))
     return jobs, pending
 
 
@@ -157,6 +167,15 @@ def run_jobs(
         todo = [replace(j, artifact_root=str(Path(out_dir) / "artifacts")) for j in todo]
     fresh: dict[str, dict[str, Any]] = {}
     done = failed = retried = running = 0
+    reused = len({j.job_id for j in jobs}) - len(todo)
+    if reused:
+        print(f"{reused} finished job(s) reused from {Path(out_dir) / 'jobs'}"
+              + (f"; {len(todo)} to run" if todo else "; nothing to run") + " (--force reruns them)", flush=True)
+
+    if not todo:  # every job stored: no progress bar, no "0/0 done"
+        if own:
+            executor.close()
+        return _stored_rows(jobs, {}, out_dir)
 
     def status() -> str:
         return (f"jobs [{executor.describe()}]: {done}/{len(todo)} done, {running} running, {failed} failed"
@@ -217,16 +236,14 @@ def run_jobs(
     finally:
         if own:
             executor.close()
-    if (not show_progress or plain) and todo:
+    if not show_progress or plain:
         print(status())
-    rows = []
-    for j in jobs:
-        row = fresh.get(j.job_id)
-        if row is None:
-            path = result_path(out_dir, j)
-            row = json.loads(path.read_text())
-        rows.append(row)
-    return rows
+    return _stored_rows(jobs, fresh, out_dir)
+
+
+def _stored_rows(jobs: list[Job], fresh: dict[str, dict[str, Any]], out_dir: Path) -> list[dict[str, Any]]:
+    """The row of every job, in job order: this run's (``fresh``) or the one stored in ``out_dir``."""
+    return [fresh.get(j.job_id) or json.loads(result_path(out_dir, j).read_text()) for j in jobs]
 
 
 def _describe(job: Job | None) -> str:

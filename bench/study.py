@@ -33,6 +33,7 @@ import yaml
 from bench.convergence import ConvergenceSpec, check_run
 from bench.data.atomic import atomic_write_bytes, atomic_write_text
 from bench.data.errors import BenchInputError
+from bench.scales import is_smoke, smoke_note
 
 
 @dataclasses.dataclass(frozen=True)
@@ -187,9 +188,10 @@ def _progress_printer(run: StudyRun, t0: float, every: float = 0.1) -> Callable[
 
 def _worker_init() -> None:
     from bench.executors.base import set_job_threads
-    from bench.executors.lifeline import exit_with_parent
+    from bench.executors.lifeline import exit_with_parent, ignore_interrupts
 
     exit_with_parent()  # a killed study leaves no worker training on (bench.executors.lifeline)
+    ignore_interrupts()  # Ctrl-C is the study's to handle: it terminates the workers
     set_job_threads(1)
 
 
@@ -305,8 +307,11 @@ def run_study(method: str, scene: str, scale: str, seeds: list[int], overrides: 
             for v in values for s in seeds]
     workers = max(1, min(workers or os.cpu_count() or 1, len(runs)))
     exact_label = {"none": "", "both": ", exact priors", "depth": ", exact depth prior", "normal": ", exact normal prior"}[exact_priors]
+    exact_label += ", smoke test: not a result" if is_smoke(scale) else ""  # in the log, study.md and study.png
     log(f"[study] {method} on {scene} ({scale}{exact_label}): {len(runs)} runs "
         f"({len(values)} value(s) x {len(seeds)} seed(s)), {snapshots} snapshots each, {workers} worker(s)")
+    if is_smoke(scale):
+        log(f"[study] {smoke_note(scale)}")
     records: list[dict[str, Any]] = []
     t0 = time.perf_counter()
     title = f"{method} on {scene} ({scale}{exact_label}); {overrides or ''}"

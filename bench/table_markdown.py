@@ -15,6 +15,7 @@ from typing import Any
 
 import pandas as pd
 
+from bench.scales import is_smoke, smoke_note
 from bench.table_report import Cell, TableReport
 from bench.table_spec import TableSpec
 
@@ -106,6 +107,7 @@ def to_markdown(report: TableReport, heading_level: int = 2) -> str:
     parts = [
         f"{h} {spec.title}",
         "",
+        *([f"**Smoke test.** {smoke_note(report.scale)}", ""] if is_smoke(report.scale) else []),
         f"Scale `{report.scale}`: {len(jobs[jobs['status'] == 'ok'])} ok, "
         f"{len(jobs[jobs['status'] == 'failed'])} failed, {n_exp - len(jobs)} pending of {n_exp} expected jobs"
         + (f"; {report.n_superseded} superseded result(s) ignored" if report.n_superseded else "")
@@ -208,8 +210,8 @@ def _claims_markdown(report: TableReport) -> str:
         lines.append(_claim_line(cr.verdict, note, c.id, c.text, cr.paper_verdict))
         lines += [f"    - {d}" for d in cr.details]
     lines += ["", "A claim is HELD when every comparison goes its way by more than the combined seed spread (std + std), "
-              "NOT HELD when one goes against it by more than that; otherwise UNDECIDED, with the verdict on the measured "
-              "means in brackets (`bench/claims.py`)."]
+              "NOT HELD when one goes against it by more than that; otherwise (also with one seed: spread unknown, and at "
+              "a smoke-test scale) UNDECIDED, with the verdict on the measured means in brackets (`bench/claims.py`)."]
     return "\n".join(lines)
 
 

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import copy
+import difflib
+import functools
 import importlib
 import json
 from pathlib import Path
@@ -107,13 +110,27 @@ class _MethodYaml(NamedTuple):
     id_neutral: dict[str, Any]  # keys left out of job ids at these values (:func:`identity_config`)
 
 
+def _yaml_file(path: Path) -> dict[str, Any]:
+    """A YAML file's data (a copy: callers may change it), parsed once per version of the file: planning a
+    table resolves one config per job, and 500 seeds re-parsed the same files thousands of times (23 s)."""
+    st = path.stat()
+    return copy.deepcopy(_parsed_yaml(str(path), st.st_mtime_ns, st.st_size))
+
+
+@functools.lru_cache(maxsize=128)
+def _parsed_yaml(path: str, mtime_ns: int, size: int) -> dict[str, Any]:
+    return yaml.safe_load(Path(path).read_text()) or {}
+
+
 def _read_config(name: str, config_dir: Path) -> _MethodYaml:
     """``configs/methods/<name>.yaml`` (a plugin's own ``config_path``), with ``base:`` inheritance resolved."""
     _load_plugins()
     path = _PLUGIN_CONFIGS.get(name) or config_dir / f"{name}.yaml"
     if not path.exists():
-        raise BenchInputError(path, f"no config file for method {name!r}")
-    data = yaml.safe_load(path.read_text()) or {}
+        known = available_methods()
+        unknown = "" if name in known else f": not a known method (known: {', '.join(known)})"
+        raise BenchInputError(path, f"no config file for method {name!r}{unknown}")
+    data = _yaml_file(path)
     defaults = dict(data.get("defaults") or {})
     scales = {k: dict(v or {}) for k, v in (data.get("scales") or {}).items()}
     neutral = dict(data.get("id_neutral") or {})
@@ -155,7 +172,9 @@ def method_config(name: str, scale: str, overrides: dict[str, Any] | None = None
     cfg = {**defaults, **scales[scale]}
     for key, value in (overrides or {}).items():
         if key not in defaults:
-            raise BenchInputError(path, f"override {key!r} is not a config key of {name!r} (keys: {sorted(defaults)})")
+            near = difflib.get_close_matches(str(key), list(defaults), n=1, cutoff=0.5)
+            hint = f"; did you mean {near[0]!r}?" if near else ""
+            raise BenchInputError(path, f"override {key!r} is not a config key of {name!r}{hint} (keys: {sorted(defaults)})")
         cfg[key] = value
     ctype = config_type(name)
     if ctype is not None:

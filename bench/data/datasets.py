@@ -83,6 +83,15 @@ def scene_hash(scene: str, effects: Mapping[str, Mapping[str, Any]] | None = Non
     return recipe_hash(recipe_path(scene), effects)
 
 
+def check_folder_scene(scene: str) -> None:
+    """Load a dataset folder a table names as a scene, raising the :class:`BenchInputError` that names its bad
+    file: a broken folder stops the run before any job (a recipe scene is checked when it is synthesised)."""
+    if is_folder_scene(scene):
+        from bench.data.formats import load_scene
+
+        load_scene(Path(scene).expanduser())
+
+
 def ensure_dataset(scene_name: str, scale: str, cache_dir: Path = DEFAULT_CACHE, scenes_dir: Path = SCENES_DIR,
                    effects: Mapping[str, Mapping[str, Any]] | None = None) -> Path:
     """Return the dataset folder of ``scene_name`` (variant ``effects``) at ``scale``, synthesising it if not

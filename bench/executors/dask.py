@@ -24,6 +24,7 @@ thread each.
 
 from __future__ import annotations
 
+import logging
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -32,6 +33,7 @@ from typing import TYPE_CHECKING, Any, Callable, Iterator, Sequence
 from urllib.parse import urlparse
 
 from bench.executors.base import DEFAULT_RETRIES, Event, Executor, ProgressFactory, execute_job, lost_row
+from bench.executors.lifeline import interrupts_ignored
 
 if TYPE_CHECKING:
     from distributed import Client, Future
@@ -76,9 +78,10 @@ class DaskExecutor(Executor):
         if self._client is None:
             from distributed import Client, LocalCluster
 
-            if self.scheduler is None:
-                self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                             host="127.0.0.1", dashboard_address=None)
+            if self.scheduler is None:  # its routine warnings (a cancelled task, a worker killed at close) not on stderr
+                with interrupts_ignored():  # the worker processes inherit it: Ctrl-C is bench's, which closes the cluster
+                    self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+                                                 host="127.0.0.1", dashboard_address=None, silence_logs=logging.ERROR)
                 self._client = Client(self._cluster, timeout=self.connect_timeout, set_as_default=False)
             else:
                 self._client = Client(self.scheduler, timeout=self.connect_timeout, set_as_default=False)

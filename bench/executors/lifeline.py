@@ -10,15 +10,24 @@ time, so each level arms it for itself:
   (and in no other: ``bench`` itself, started by a shell or ``nohup``, must not die with its shell);
 * the workers (their parent is the fork server): :func:`exit_with_parent` in the pool initializer.
 
+The fork server and the workers ignore SIGINT (a terminal's Ctrl-C reaches the whole process group):
+``bench`` catches it and terminates them, and none of them prints a ``KeyboardInterrupt`` traceback. A Dask
+``LocalCluster``'s worker processes are started under :func:`interrupts_ignored` for the same reason.
+
 When ``bench`` dies the fork server is killed, which kills the workers; the resource tracker then reads
 EOF from its last writer and exits by itself. No-op outside Linux.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import sys
+import threading
+import traceback
+from types import TracebackType
+from typing import Iterator
 
 ENV = "BENCH_LIFELINE_PID"
 FORKSERVER_PRELOAD = [__name__]
@@ -40,10 +49,42 @@ def exit_with_parent(sig: int = signal.SIGKILL) -> None:
         os._exit(1)
 
 
+def ignore_interrupts() -> None:
+    """Ignore SIGINT in this (worker) process: Ctrl-C is ``bench``'s to handle; it terminates its workers."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+@contextlib.contextmanager
+def interrupts_ignored() -> Iterator[None]:
+    """Ignore SIGINT in this process while the block starts worker processes, which inherit the ignored
+    disposition (a handler would not survive their ``exec``); restored after. The main thread only."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def mark_parent() -> None:
     """Record this process as the one whose death must take the fork server (and so the pool) with it."""
     os.environ[ENV] = str(os.getpid())
 
 
+def _quiet_when_the_pool_is_gone(exc_type: type[BaseException], exc: BaseException, tb: TracebackType | None) -> None:
+    """``sys.excepthook`` of the fork server's children: a worker forked while ``bench`` shuts its pool down (Ctrl-C as
+    the workers start) finds the pool's semaphore already removed (``FileNotFoundError`` while unpickling it) and
+    exits without a traceback; any other error is printed as usual."""
+    if issubclass(exc_type, FileNotFoundError) and any(f.f_code.co_name == "__setstate__" for f, _ in traceback.walk_tb(tb)):
+        return
+    sys.__excepthook__(exc_type, exc, tb)
+
+
 if os.environ.get(ENV) == str(os.getppid()):  # imported by the fork server bench started: arm it
     exit_with_parent()
+    # Ctrl-C reaches the whole process group; bench stops the workers itself. The fork server ignores SIGINT once
+    # its preload is imported: ignore it from here, so a Ctrl-C while it imports torch prints no traceback.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    sys.excepthook = _quiet_when_the_pool_is_gone  # inherited by the workers it forks

@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence
 
 from bench.executors.base import DEFAULT_RETRIES, Event, Executor, ProgressFactory, execute_job, lost_row, set_job_threads, threads_per_job
-from bench.executors.lifeline import FORKSERVER_PRELOAD, exit_with_parent, mark_parent
+from bench.executors.lifeline import FORKSERVER_PRELOAD, exit_with_parent, ignore_interrupts, mark_parent
 from bench.jobs import Job
 
 START_METHOD = "forkserver"
@@ -37,6 +37,7 @@ PRELOAD = [*FORKSERVER_PRELOAD, "bench.execute"]  # imported once by the fork se
 
 def _init_worker(threads: int) -> None:
     exit_with_parent()
+    ignore_interrupts()
     set_job_threads(threads)
 
 

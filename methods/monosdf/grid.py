@@ -15,7 +15,7 @@ Two implementations with one contract (tests compare them):
 
 * ``interpolate_reference``: plain PyTorch gathers; autograd gives the table gradient. Obviously correct.
 * ``interpolate_fast``: a C++/OpenMP kernel (``_grid_kernel.cpp``, compiled on first use with
-  ``torch.utils.cpp_extension.load``, cached in ``~/.cache/torch_extensions``) with a hand-written
+  ``torch.utils.cpp_extension.load`` in a build folder keyed by its sources and flags, ``methods.cpp_build``) with a hand-written
   backward (scatter-add into the table). Falls back to the reference when no compiler is available.
 """
 

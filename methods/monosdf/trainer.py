@@ -14,7 +14,6 @@ run continues exactly where it stopped.
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 from typing import Any, Callable, cast
 
@@ -26,6 +25,7 @@ from torch.profiler import record_function
 from bench.data.config import config_record
 from bench.data.scene import Scene
 from methods.base import Snapshot
+from methods.cpp_build import OwnClock
 from methods.monosdf.config import MonoSDFConfig
 from methods.monosdf.error_bounded import error_bounded_samples
 from methods.monosdf.field import ColorNetwork, LaplaceDensity, SDFNetwork
@@ -552,6 +552,9 @@ def train_with_snapshots(
             that step, if any): MonoInstance's between-stage work and phase switches. Their wall time
             counts towards the snapshots' seconds, not towards the returned train seconds.
 
+    Every time is wall time minus the C++ kernel builds inside it (:class:`methods.cpp_build.OwnClock`):
+    a first step that waited for a compile books its own work only.
+
     Returns:
         (snapshots; seconds = start_seconds + training + events so far + this snapshot's mesh extraction,
         earlier extractions excluded; each with :meth:`MonoSDFTrainer.diagnostics`, whose own time is not
@@ -562,20 +565,20 @@ def train_with_snapshots(
     snaps: list[Snapshot] = []
     train_s = event_s = mesh_s = 0.0
     for stop in sorted(set(marks) | {k for k in events if 0 <= k <= iterations}):
-        t = time.perf_counter()
+        clock = OwnClock()
         while trainer.step_count < stop:
             logs = trainer.step()
             if progress and trainer.step_count % 25 == 0:
                 progress(trainer.step_count / iterations, f"step {trainer.step_count}/{iterations} loss {logs['loss']:.4f} beta {logs['beta']:.4f}")
-        train_s += time.perf_counter() - t
+        train_s += clock.seconds()
         if stop in events:
-            t = time.perf_counter()
+            clock = OwnClock()
             events[stop]()
-            event_s += time.perf_counter() - t
+            event_s += clock.seconds()
         if stop in marks:
-            t = time.perf_counter()
+            clock = OwnClock()
             mesh = trainer.extract_mesh(mesh_resolution)
-            mesh_s = time.perf_counter() - t
+            mesh_s = clock.seconds()
             snaps.append(Snapshot(stop / iterations, trainer.step_count, start_seconds + train_s + event_s + mesh_s, mesh=mesh,
                                   diagnostics=trainer.diagnostics(mesh)))
     return snaps, train_s, mesh_s

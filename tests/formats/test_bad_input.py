@@ -165,6 +165,18 @@ def test_unknown_format(tmp_path, scannet, scene):
         load_scene(tmp_path / "nowhere")
 
 
+def test_meta_naming_another_format_than_the_files_names_both(scannet):
+    import json
+
+    meta = json.loads((scannet / "meta.json").read_text())
+    (scannet / "meta.json").write_text(json.dumps({**meta, "format": "llff"}))
+    with raises(r"meta\.json: says format 'llff', but the folder's files are those of 'scannet' \(cameras\.npz \+ \*_rgb\.png\) "
+                r"and not those of 'llff' \(poses_bounds\.npy\)"):
+        load_scene(scannet)
+    (scannet / "meta.json").write_text(json.dumps({**meta, "format": "replica"}))  # the same files: no complaint
+    assert detect_format(scannet) == "replica"
+
+
 def test_unknown_option(scannet):
     with raises(r"unknown option\(s\) \['factor'\] for format 'scannet'"):
         load_scene(scannet, factor=2)

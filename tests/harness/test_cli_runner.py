@@ -52,11 +52,18 @@ def test_run_ablation_tiny_writes_table_with_oracle_row(tiny_run, capsys):
 
 
 @pytest.mark.slow
-def test_rerun_skips_finished_jobs(tiny_run):
+def test_rerun_skips_finished_jobs(tiny_run, capsys):
     _, out = tiny_run
     files = {p: p.stat().st_mtime_ns for p in (out / "jobs").glob("*.json")}
+    capsys.readouterr()
     assert main(["run", "--table", "ablation", "--scale", "tiny", "--rows", ORACLE, "--out", str(out.parent), "--quiet"]) == 0
     assert {p: p.stat().st_mtime_ns for p in (out / "jobs").glob("*.json")} == files
+    printed = capsys.readouterr().out
+    assert f"1 finished job(s) reused from {out / 'jobs'}; nothing to run" in printed and "0/0" not in printed
+    wrote = next(line for line in printed.splitlines() if line.startswith("wrote "))
+    for name in ("ablation.csv", "ablation_time.csv", "ablation_curve.csv", "ablation.md", "ablation_accuracy_vs_time.png",
+                 "ablation_reconstructions.png"):
+        assert str(out / name) in wrote  # every output the run wrote, not the first three
     assert not [p for p in out.rglob("*.tmp")]
 
 
@@ -195,6 +202,7 @@ def test_failed_job_makes_run_exit_1_and_plain_log_has_a_line_per_job(tmp_path, 
     captured = capsys.readouterr()
     assert code == 1
     assert "started Oracle" in captured.out and "failed Oracle" in captured.out
+    assert "Scale 'tiny' is a smoke test" in captured.out.split("started Oracle")[0]  # said before the run, not only in the table
     assert "jobs failed" in captured.err
     assert (tmp_path / "tiny" / "ablation.md").exists()
 

@@ -79,18 +79,21 @@ SPEC: dict[str, Any] = {
 }
 
 
-def write_table(tmp_path: Path, curves: dict[str, list[float]], spec: dict[str, Any] = SPEC) -> Any:
+def write_table(tmp_path: Path, curves: dict[str, list[float]], spec: dict[str, Any] = SPEC, scale: str = "small",
+                seeds: tuple[int, ...] = (0, 1, 2)) -> Any:
     (tmp_path / "res" / "jobs").mkdir(parents=True)
+    spec = {**spec, "seeds": {scale: list(seeds)},
+            "datasets": [{**spec["datasets"][0], "scenes": {scale: ["s0"]}}]}
     for row, shape in curves.items():
-        for seed in (0, 1, 2):
+        for seed in seeds:
             f = [x + 0.001 * seed for x in shape]
             j = {"job_id": f"{row}-{seed}", "table": "conv", "row": row, "method": "x", "scene": "s0", "dataset": "scannet",
-                 "seed": seed, "scale": "small", "status": "ok", "metrics": {"fscore": f[-1]}, "timings": {"total": 1.0},
+                 "seed": seed, "scale": scale, "status": "ok", "metrics": {"fscore": f[-1]}, "timings": {"total": 1.0},
                  "config": {} if row == "Oracle" else {"iterations": 100}, "curve": curve(*f), "created": "2026-12-02T00:00:00"}
             (tmp_path / "res" / "jobs" / f"{row}-{seed}.json").write_text(json.dumps(j))
     p = tmp_path / "conv.yaml"
     p.write_text(yaml.safe_dump(spec, sort_keys=False))
-    return build_table_by_label(load_table_spec(p), collect_results(tmp_path / "res"), "small")
+    return build_table_by_label(load_table_spec(p), collect_results(tmp_path / "res"), scale)
 
 
 def test_a_claim_on_an_unconverged_row_is_undecided(tmp_path: Path) -> None:
@@ -112,6 +115,28 @@ def test_converged_rows_keep_the_verdict_and_no_spec_changes_nothing(tmp_path: P
     rep = write_table(tmp_path / "plain", {"Oracle": [0.5, 0.8, 0.99], "Base": [0.5, 0.6, 0.7], "Full": [0.6, 0.8, 0.81]}, plain)
     assert [c.verdict for c in rep.claims] == ["HELD", "HELD"] and rep.convergence == {}
     assert "converged" not in to_markdown(rep).split("## Claims")[0].split("\n\n")[1]
+
+
+CLEAR = {"Oracle": [0.5, 0.8, 0.99], "Base": [0.5, 0.7, 0.7], "Full": [0.6, 0.8, 0.81]}  # converged, Full ahead by 0.11
+
+
+def test_one_seed_leaves_every_claim_undecided_with_the_measured_verdict(tmp_path: Path) -> None:
+    rep = write_table(tmp_path, CLEAR, seeds=(0,))
+    assert [c.verdict for c in rep.claims] == [
+        "UNDECIDED (spread unknown, one seed: Full fscore vs Base fscore [scannet]; as measured: HELD)",
+        "UNDECIDED (spread unknown, one seed: Oracle fscore vs Base fscore [scannet]; as measured: HELD)"]
+
+
+def test_the_tiny_scale_is_a_smoke_test_in_every_output(tmp_path: Path) -> None:
+    """At ``tiny`` no row gets a convergence verdict and no claim a decision, even on curves that would pass at
+    another scale, and the markdown says that the table is a smoke test."""
+    rep = write_table(tmp_path, CLEAR, scale="tiny", seeds=(0, 1, 2))
+    assert {v.label() for v in rep.convergence.values()} == {"n/a (smoke test)"}
+    assert rep.tidy[rep.tidy["source"] == "ours"]["converged"].isna().all()
+    assert [c.verdict for c in rep.claims] == ["UNDECIDED (smoke test at scale 'tiny': not a result; as measured: HELD)"] * 2
+    md = to_markdown(rep)
+    assert "**Smoke test.** Scale 'tiny' is a smoke test" in md.split("| Method")[0]
+    assert "smoke test" not in to_markdown(write_table(tmp_path / "small", CLEAR)).lower()
 
 
 def test_bad_convergence_block_names_the_key(tmp_path: Path) -> None:

@@ -13,13 +13,13 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from cluster_helpers import kill_group, start, wait_for
 
 from bench.executors.dask import DaskExecutor
 from bench.executors.local import LocalExecutor
@@ -38,16 +38,6 @@ DEADLINE = 240.0  # seconds for the whole distributed run (typically ~30 s)
 RTOL, ATOL = 1e-6, 1e-9  # determinism tolerance: same job, same machine, other process / thread count
 
 
-def _wait_for(cond, timeout: float, what: str, poll: float = 0.05):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        value = cond()
-        if value:
-            return value
-        time.sleep(poll)
-    raise TimeoutError(f"timed out after {timeout:.0f} s waiting for {what}")
-
-
 def _tiny_table(tmp_path: Path):
     """The ablation spec with three seeds at the tiny scale (a tiny table with several jobs)."""
     text = (REPO / "configs" / "tables" / "ablation.yaml").read_text()
@@ -61,11 +51,6 @@ def _tiny_table(tmp_path: Path):
     jobs, _pending = resolve_jobs(oracle)
     assert len(jobs) == len(SEEDS)
     return spec, jobs
-
-
-def _start(args: list[str], log: Path, env: dict[str, str]) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", *args], stdout=log.open("wb"), stderr=subprocess.STDOUT,
-                            env=env, start_new_session=True, cwd=str(REPO))
 
 
 def test_cluster_survives_a_killed_worker_and_matches_local(tmp_path):
@@ -82,12 +67,12 @@ def test_cluster_survives_a_killed_worker_and_matches_local(tmp_path):
     procs: dict[str, subprocess.Popen] = {}
     monitor = None
     try:
-        procs["scheduler"] = _start(["distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port", "0",
+        procs["scheduler"] = start(["distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port", "0",
                                      "--no-dashboard", "--scheduler-file", str(sched_file)],
                                     tmp_path / "scheduler.log", env)
-        _wait_for(lambda: sched_file.exists() and sched_file.stat().st_size > 0, 60, "the scheduler file")
+        wait_for(lambda: sched_file.exists() and sched_file.stat().st_size > 0, 60, "the scheduler file")
         for name in ("w1", "w2"):
-            procs[name] = _start(["distributed.cli.dask_worker", "--scheduler-file", str(sched_file),
+            procs[name] = start(["distributed.cli.dask_worker", "--scheduler-file", str(sched_file),
                                   "--host", "127.0.0.1", "--nthreads", "1", "--no-nanny", "--name", name,
                                   "--no-dashboard", "--death-timeout", "60",
                                   "--local-directory", str(tmp_path / f"dask-{name}")],
@@ -116,7 +101,7 @@ def test_cluster_survives_a_killed_worker_and_matches_local(tmp_path):
             addr = next((a for a, w in info.items() if w.get("name") == "w1"), None)
             return addr is not None and bool(monitor.processing().get(addr))
 
-        _wait_for(w1_busy, 120, "worker w1 to start a job")
+        wait_for(w1_busy, 120, "worker w1 to start a job")
         time.sleep(0.5)  # not synchronisation: let the job get past its start (it runs for seconds)
         os.kill(procs["w1"].pid, signal.SIGKILL)
         procs["w1"].wait(timeout=30)
@@ -159,9 +144,4 @@ def test_cluster_survives_a_killed_worker_and_matches_local(tmp_path):
         if monitor is not None:
             monitor.close()
         for proc in procs.values():  # by pid: each process leads its own session
-            if proc.poll() is None:
-                try:
-                    os.killpg(proc.pid, signal.SIGKILL)
-                except ProcessLookupError:
-                    pass
-                proc.wait(timeout=30)
+            kill_group(proc)

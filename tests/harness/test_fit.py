@@ -63,6 +63,8 @@ def test_fit_on_a_hand_written_folder_with_and_without_gt(tmp_path, capsys):
     assert main([*args[:2], str(tmp_path / "room_gt"), *args[3:-1], str(out2)]) == 0
     row = json.loads((out2 / "fit.json").read_text())
     assert row["no_metrics"] is None and {"fscore", "acc", "comp"} <= set(row["metrics"])
+    assert "Scale 'tiny' is a smoke test" in row["smoke_test"]  # metrics at tiny are not a result: every output says so
+    assert "**Smoke test.**" in (out2 / "fit.md").read_text() and "[fit] Scale 'tiny' is a smoke test" in capsys.readouterr().out
 
 
 def test_fit_bad_folder_is_one_clear_error(tmp_path, capsys):
@@ -71,4 +73,8 @@ def test_fit_bad_folder_is_one_clear_error(tmp_path, capsys):
     assert main(["fit", "monosdf", str(folder), "--scale", "tiny", "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "image number 1 is missing" in err[0]
+    assert not (tmp_path / "o").exists()  # nothing left behind
+    assert main(["fit", "mono_sdf", str(folder), "--out", str(tmp_path / "o")]) == 2  # not a method: the known ones listed
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "'mono_sdf': not a known method (known: " in err[0] and "monosdf" in err[0]
     assert main(["fit", "monosdf", str(tmp_path / "nowhere"), "--out", str(tmp_path / "o")]) == 2

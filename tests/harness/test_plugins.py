@@ -77,7 +77,7 @@ def test_a_broken_plugin_is_one_clear_error(installed_plugin, capsys):
 
 
 @pytest.mark.slow
-def test_a_table_may_name_a_dataset_folder_as_a_scene(tmp_path):
+def test_a_table_may_name_a_dataset_folder_as_a_scene(tmp_path, capsys):
     """A user's own folder (here: a synthesised scene copied out of the cache, loaded as real data) as a
     table's scene; the job id follows the folder's bytes."""
     import shutil as sh
@@ -104,3 +104,18 @@ rows:
     before = scene_hash(str(mine))
     (mine / "000000_rgb.png").write_bytes((mine / "000001_rgb.png").read_bytes())
     assert scene_hash(str(mine)) != before
+    (mine / "cameras.npz").unlink()  # a broken folder: bad input before any job, not a table of failed cells
+    assert main(["run", "--table", str(table), "--scale", "tiny", "--out", str(tmp_path / "again"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "cameras.npz: file is missing" in err[0], err
+    assert not (tmp_path / "again").exists()
+
+
+def test_installing_the_example_leaves_no_untracked_build_folder():
+    """``pip install examples/plugin_method`` builds in ``examples/plugin_method/build/``: git ignores it."""
+    import subprocess
+
+    if shutil.which("git") is None or not (REPO / ".git").exists():
+        pytest.skip("not a git checkout")
+    probe = "examples/plugin_method/build/lib/bench_example_method/__init__.py"
+    assert subprocess.run(["git", "check-ignore", "-q", "--no-index", probe], cwd=REPO).returncode == 0

@@ -170,8 +170,10 @@ def test_regress_cli_exit_codes(tmp_path, capsys):
 
     spec = load_table_spec(Path(__file__).resolve().parents[2] / "configs" / "tables" / "ablation.yaml")
     assert set(doc["cells"]) == {oracle} and spec.row(oracle).method in available_methods()  # the selected rows only
+    capsys.readouterr()
     assert main(base) == 0
     assert (out / "tiny" / "regress_ablation.md").read_text().startswith("# Regression: table `ablation`, scale `tiny`: PASSED")
+    assert f"table ablation: passed; report {out / 'tiny' / 'regress_ablation.md'} (and .json)" in capsys.readouterr().out
     doc["cells"][oracle]["scannet"]["fscore"]["mean"] += 0.1  # the reference was 0.1 better
     path.write_text(json.dumps(doc))
     capsys.readouterr()

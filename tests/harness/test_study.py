@@ -68,6 +68,7 @@ def test_study_cli_writes_curves_with_diagnostics(tmp_path):
     assert (out / "study.png").stat().st_size > 1000
     md = (out / "study.md").read_text()
     assert "appearance_dim" in md and "flat" in md
+    assert "(tiny, exact priors, smoke test: not a result)" in md  # tiny: the checks below are no verdict
     meshes = sorted(p.name for p in (out / "meshes").glob("*.ply"))  # every snapshot's mesh of every run, to look at
     assert meshes == ["appearance_dim=0_seed0.ply", "appearance_dim=0_seed0_it4.ply",
                       "appearance_dim=8_seed0.ply", "appearance_dim=8_seed0_it4.ply"]

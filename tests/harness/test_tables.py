@@ -185,3 +185,21 @@ def test_paper_only_claim_metric_rejected(tmp_path: Path) -> None:
 def test_parse_in_memory_names_where() -> None:
     with pytest.raises(BenchInputError, match=r"^here: config key 'title' has no value"):
         parse_table_spec({"name": "x"}, "here")
+
+
+def test_planning_many_seeds_reads_each_config_and_scene_once(monkeypatch):
+    """500 seeds of a table are 3000 jobs: their configs and scene hashes are resolved once per distinct
+    (method, overrides) and scene, not once per job (re-parsing the YAML per job took minutes)."""
+    import yaml
+
+    import bench.runner as runner
+    from bench.pipeline import load_tables, plan_table
+
+    parsed, hashed = [], []
+    real_load, real_hash = yaml.safe_load, runner.scene_hash
+    monkeypatch.setattr(yaml, "safe_load", lambda text: parsed.append(1) or real_load(text))
+    monkeypatch.setattr(runner, "scene_hash", lambda *a: hashed.append(a) or real_hash(*a))
+    spec = load_tables(["ablation"])[0]
+    planned = plan_table(spec, "tiny", seeds=list(range(500)), threads=1)
+    assert len(planned.jobs) == 500 * len(spec.rows) and len({j.job_id for j in planned.jobs}) == len(planned.jobs)
+    assert len(parsed) < 20 and len(hashed) == 1  # the table, recipe and method files, not 2 per job

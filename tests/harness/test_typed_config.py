@@ -124,6 +124,12 @@ def test_bench_config_prints_the_checked_config_and_rejects_bad_overrides(capsys
     assert main(["config", "monosdf", "--set", "lr=fast"]) == 2
     assert "config key 'lr' must be a number in (0, inf) (got 'fast')" in capsys.readouterr().err
     assert main(["config", "monosdf", "--set", "lr_typo=1"]) == 2  # not a key of the method
+    assert main(["config", "monosdf", "--set", "depth_wieght=0.1"]) == 2  # a typo: the nearest key is named first
+    err = capsys.readouterr().err
+    assert "override 'depth_wieght' is not a config key of 'monosdf'; did you mean 'depth_weight'? (keys: [" in err
+    assert main(["config", "monosdff"]) == 2  # not a method: the known ones are listed
+    err = capsys.readouterr().err
+    assert "no config file for method 'monosdff': not a known method (known: " in err and "monoinstance" in err
 
 
 def test_id_neutral_keys_leave_job_ids_alone_only_at_their_neutral_value():

@@ -62,3 +62,39 @@ def test_a_row_resumed_from_the_shared_stage_ends_where_training_every_step_ends
         np.testing.assert_array_equal(f, rf)
     np.testing.assert_array_equal(full.uncertainty, reference.uncertainty)
     assert full.extra["beta"] == reference.extra["beta"]
+
+
+@pytest.mark.slow
+def test_a_stage_trained_while_another_process_builds_the_kernel_books_its_training_only(tiny_scene, tmp_path: Path,
+                                                                                        monkeypatch):
+    """The first use of the C++ kernel waits for a build another process holds (its ``bench-build.lock``): the
+    stored stage-1 seconds and the job's setup + train seconds leave that wait out (a later row loading the stage
+    would book it forever)."""
+    import fcntl
+    import threading
+    import time
+
+    from methods.cpp_build import CppExtension
+    from methods.monosdf import grid
+
+    if not grid.fast_available():
+        pytest.skip("no C++ compiler")
+    k = grid._KERNEL
+    fresh = CppExtension(k.name, grid.__file__, tuple(p.name for p in k.sources), k.cflags, k.ldflags)
+    monkeypatch.setattr(grid, "_KERNEL", fresh)  # not loaded yet in this process: its first use takes the lock
+    hold_s = 6.0
+    with open(fresh.build_dir() / "bench-build.lock", "a+") as held:
+        fcntl.flock(held, fcntl.LOCK_EX)  # another process's build, still running
+        release = threading.Timer(hold_s, lambda: fcntl.flock(held, fcntl.LOCK_UN))
+        release.start()
+        try:
+            with stage_checkpoints(tmp_path):
+                t = time.perf_counter()
+                art, _ = _fit(tiny_scene, BASE)
+                wall = time.perf_counter() - t
+        finally:
+            release.join()
+    stored = torch.load(next(tmp_path.glob("*.pt")), weights_only=False)["train_seconds"]
+    assert fresh.load() is not None and wall > hold_s
+    assert 0 < stored < wall - 0.8 * hold_s
+    assert art.timings["setup"] + art.timings["train"] < wall - 0.8 * hold_s

@@ -89,22 +89,48 @@ def detect_format(path: Path) -> str:
     if not path.is_dir():
         raise BenchInputError(path, "dataset folder does not exist")
     meta_path = path / META_FILE
+    looks_like = format_from_files(path)
     if meta_path.is_file():
         meta = read_json(meta_path)
         fmt = meta.get("format") if isinstance(meta, dict) else None
         if fmt is not None:
             _check_format(fmt, meta_path)
+            if looks_like is not None and _family(looks_like) != _family(fmt) and format_from_files(path, only=fmt) is None:
+                raise BenchInputError(meta_path, f"says format {fmt!r}, but the folder's files are those of {looks_like!r} "
+                                      f"({FORMAT_FILES[looks_like]}) and not those of {fmt!r} ({FORMAT_FILES[fmt]}); "
+                                      f"correct its 'format' or remove meta.json")
             return str(fmt)
-    if (path / llff.POSES_FILE).is_file():
-        return "llff"
-    has_cams = (path / monosdf.CAMERAS_FILE).is_file()
-    if (path / dtu.IMAGE_DIR).is_dir() and (has_cams or (path / "cameras_sphere.npz").is_file()):
-        return "dtu"
-    if has_cams and any(path.glob("*_rgb.png")):
-        return "replica" if any(path.glob("*_mask.npy")) else "scannet"
+    if looks_like is not None:
+        return looks_like
     raise BenchInputError(
         path, "unknown dataset format (no meta.json, poses_bounds.npy, image/ + cameras.npz or cameras.npz + *_rgb.png)"
     )
+
+
+FORMAT_FILES = {"llff": "poses_bounds.npy", "dtu": "image/ + cameras.npz", "scannet": "cameras.npz + *_rgb.png",
+                "replica": "cameras.npz + *_rgb.png + *_mask.npy"}
+"""The files that tell each format apart (:func:`format_from_files`), as the messages name them."""
+
+
+def _family(fmt: str) -> str:
+    """Formats with the same files (replica is scannet's layout plus masks) count as one."""
+    return "scannet" if fmt == "replica" else fmt
+
+
+def format_from_files(path: Path, only: str | None = None) -> str | None:
+    """The format a folder's files look like (:data:`FORMAT_FILES`), or None; ``only``: test that format alone
+    (replica and scannet share their files: either matches the other)."""
+    checks = {
+        "llff": lambda: (path / llff.POSES_FILE).is_file(),
+        "dtu": lambda: (path / dtu.IMAGE_DIR).is_dir() and ((path / monosdf.CAMERAS_FILE).is_file() or (path / "cameras_sphere.npz").is_file()),
+        "scannet": lambda: (path / monosdf.CAMERAS_FILE).is_file() and any(path.glob("*_rgb.png")),
+    }
+    for fmt, check in checks.items():
+        if (only is None or _family(only) == fmt) and check():
+            if fmt == "scannet":
+                return "replica" if any(path.glob("*_mask.npy")) else "scannet"
+            return fmt
+    return None
 
 
 def load_scene(path: Path, fmt: str | None = None, **options: Any) -> Scene:
