@@ -198,7 +198,7 @@ def output_folder(out: Path) -> Iterator[None]:
 def _workers(args: argparse.Namespace) -> int | None:
     """``--workers``, or for the local executor one single-threaded job per core: 2 x 1-thread MonoSDF
     jobs do 0.67 M samples/s in total, one 2-thread job 0.53 M (benchmarks/bench_monosdf_step.py,
-    README "Measured speed")."""
+    docs/performance.md)."""
     if args.workers is None and args.executor == "local":
         from bench.executors.base import available_cores
 

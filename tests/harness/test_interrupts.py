@@ -7,6 +7,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -15,6 +16,7 @@ import pytest
 from bench.cli import main
 
 REPO = Path(__file__).resolve().parents[2]
+MARKER_WAIT_S = 300  # a run that never prints its marker is killed then (the test fails on the missing marker, never hangs)
 
 
 def _bench(*args: str, **kw) -> subprocess.Popen:
@@ -33,6 +35,15 @@ def _interrupt_when(out: Path, marker: str | None, delay_s: float, executor: str
                "--workers", "2", "--force", "--out", str(out), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     assert p.stdout is not None and p.stderr is not None
     lines = []
+
+    def kill_group() -> None:
+        try:
+            os.killpg(p.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+
+    watchdog = threading.Timer(MARKER_WAIT_S, kill_group)
+    watchdog.start()
     try:
         if marker is None:
             time.sleep(delay_s)
@@ -45,8 +56,9 @@ def _interrupt_when(out: Path, marker: str | None, delay_s: float, executor: str
                 break
         rest, err = p.communicate(timeout=120)
     finally:
+        watchdog.cancel()
         if p.poll() is None:
-            os.killpg(p.pid, signal.SIGKILL)
+            kill_group()
     return p.returncode, "".join(lines) + rest, err
 
 
