@@ -82,7 +82,14 @@ def _quiet_when_the_pool_is_gone(exc_type: type[BaseException], exc: BaseExcepti
     sys.__excepthook__(exc_type, exc, tb)
 
 
-if os.environ.get(ENV) == str(os.getppid()):  # imported by the fork server bench started: arm it
+def _is_fork_server() -> bool:
+    """True in a multiprocessing fork server (started as ``python -c "from multiprocessing.forkserver import main;
+    ..."``, it imports this module as its preload). Another process whose parent set the variable, e.g. a ``bench``
+    command started by a program that has run a pool itself, inherits it but must not arm: it would ignore Ctrl-C."""
+    return sys.argv[:1] == ["-c"] and "multiprocessing.forkserver" in sys.modules
+
+
+if os.environ.get(ENV) == str(os.getppid()) and _is_fork_server():  # imported by the fork server bench started: arm it
     exit_with_parent()
     # Ctrl-C reaches the whole process group; bench stops the workers itself. The fork server ignores SIGINT once
     # its preload is imported: ignore it from here, so a Ctrl-C while it imports torch prints no traceback.
