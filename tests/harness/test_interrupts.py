@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
+from cluster_helpers import kill_group
 
 from bench.cli import main
 
@@ -39,14 +40,7 @@ def _interrupt_when(out: Path, marker: str | None, delay_s: float, executor: str
                "--workers", "2", "--force", "--out", str(out), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     assert p.stdout is not None and p.stderr is not None
     lines = []
-
-    def kill_group() -> None:
-        try:
-            os.killpg(p.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-
-    watchdog = threading.Timer(MARKER_WAIT_S, kill_group)
+    watchdog = threading.Timer(MARKER_WAIT_S, kill_group, args=(p,))
     watchdog.start()
     try:
         if marker is None:
@@ -61,8 +55,7 @@ def _interrupt_when(out: Path, marker: str | None, delay_s: float, executor: str
         rest, err = p.communicate(timeout=120)
     finally:
         watchdog.cancel()
-        if p.poll() is None:
-            kill_group()
+        kill_group(p)
     return p.returncode, "".join(lines) + rest, err
 
 
