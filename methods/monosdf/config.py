@@ -45,7 +45,7 @@ class MonoSDFConfig:
     bounding_sphere: Annotated[float, Positive]
     # field and its initialisation
     inside_out: bool | Literal["auto"]
-    init_radius: Annotated[float, Positive]
+    init_radius: Annotated[float, Positive] | Literal["auto"]
     use_grid: bool
     grid_levels: Annotated[int, AtLeastOne]
     grid_features: Annotated[int, AtLeastOne]

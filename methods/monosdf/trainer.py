@@ -48,6 +48,41 @@ def resolve_inside_out(value: Any, scene: Scene) -> bool:
     raise ValueError(f"inside_out must be true, false or 'auto', got {value!r}")
 
 
+# Geometric-init sphere radius (``init_radius: auto``). MonoSDF's configs set it per dataset (the IDR bias: 0.9 for
+# ScanNet, 0.6 for Replica and DTU) in MonoSDF's own normalisation of an indoor scene, where one unit is
+# (largest extent of the camera positions + 3 m) / 2 (preprocess/scannet_to_monosdf.py: "+3 because we assume each
+# camera sees 1.5 meters forward"). A room here is normalised by its own size (the unit sphere holds the room),
+# so the same bias is converted into the scene's units: the sphere then lies where MonoSDF's would, relative to
+# the cameras (docs/studies/no-prior-fog-mode.md: at 0.9 of the room's own sphere it lies 0.7-1.6 m behind the
+# walls, and a no-prior run fogs). Objects and other kinds keep the bias as it is (their normalisation is MonoSDF's).
+INIT_RADIUS_OF_FORMAT = {"scannet": 0.9, "replica": 0.6, "dtu": 0.6}
+DEFAULT_INIT_RADIUS = 0.9
+MONOSDF_CAMERA_MARGIN_M = 3.0
+
+
+def monosdf_unit_m(cam_to_world: np.ndarray) -> float:
+    """MonoSDF's normalisation of an indoor scene: the metres of one normalised unit, half of (the largest
+    extent of the camera positions + ``MONOSDF_CAMERA_MARGIN_M``). cam_to_world: (N, 4, 4), metres."""
+    positions = np.asarray(cam_to_world, dtype=np.float64)[:, :3, 3]
+    return (float((positions.max(axis=0) - positions.min(axis=0)).max()) + MONOSDF_CAMERA_MARGIN_M) / 2.0
+
+
+def resolve_init_radius(value: Any, scene: Scene) -> float:
+    """The geometric-init sphere radius in the scene's normalised units: ``value`` itself, or for ``"auto"``
+    MonoSDF's bias for ``scene.source_format`` (:data:`INIT_RADIUS_OF_FORMAT`, else :data:`DEFAULT_INIT_RADIUS`),
+    for a room converted from MonoSDF's normalisation (:func:`monosdf_unit_m`) into the scene's
+    (``scale_mat``: metres per unit)."""
+    if value == "auto":
+        bias = INIT_RADIUS_OF_FORMAT.get(scene.source_format, DEFAULT_INIT_RADIUS)
+        if scene.kind != "room":
+            return bias
+        scene_unit_m = float(abs(np.linalg.det(np.asarray(scene.scale_mat, dtype=np.float64)[:3, :3]))) ** (1.0 / 3.0)
+        return bias * monosdf_unit_m(scene.cam_to_world) / scene_unit_m
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0:
+        return float(value)
+    raise ValueError(f"init_radius must be a positive number or 'auto', got {value!r}")
+
+
 PRUNE_WORTH = 0.75  # prune_weight: prune only while the last step had at most this fraction of samples above it
                    # (the no-gradient pass over all samples costs ~15 % of a step: measured, docs/studies/monosdf-speed.md)
 WEIGHTED_SAMPLE = 1e-4  # a sample with a smaller rendering weight counts as empty space in ``samples_weighted``
@@ -99,7 +134,7 @@ class MonoSDFTrainer:
 
         spec = make_grid_spec(cfg.grid_levels, cfg.grid_features, cfg.grid_log2_table, cfg.grid_base_res, cfg.grid_max_res) if cfg.use_grid else None
         self.sdf = SDFNetwork(spec, hidden=cfg.mlp_hidden, layers=cfg.mlp_layers, geo_features=cfg.geo_features,
-                              radius=self.radius, init_radius=cfg.init_radius, inside_out=resolve_inside_out(cfg.inside_out, scene),
+                              radius=self.radius, init_radius=resolve_init_radius(cfg.init_radius, scene), inside_out=resolve_inside_out(cfg.inside_out, scene),
                               fast_grid=cfg.fast_grid, seed=seed, pe_frequencies=int(cfg.pe_frequencies),
                               skip=tuple(cfg.mlp_skip), weight_norm=cfg.weight_norm)
         self.color = ColorNetwork(cfg.geo_features, cfg.color_hidden, cfg.color_layers,

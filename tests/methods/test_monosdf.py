@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import dataclasses
 
 import numpy as np
 import pytest
@@ -847,3 +848,32 @@ def test_step_labels_every_phase_the_step_benchmark_times(tiny_scene):
             tr.step(0)
         seen |= {e.key for e in prof.key_averages()}
     assert set(bench.PHASES) <= seen, set(bench.PHASES) - seen
+
+
+@pytest.mark.parametrize("source_format,bias", [("scannet", 0.9), ("replica", 0.6), ("dtu", 0.6), ("llff", 0.9)])
+def test_init_radius_auto_is_monosdfs_bias_in_monosdfs_normalisation(tiny_scene, monkeypatch, source_format, bias):
+    """``init_radius: auto`` (the default): MonoSDF's bias for the scene's dataset format (ScanNet 0.9, Replica /
+    DTU 0.6; another format ScanNet's), for a room converted from MonoSDF's normalisation (one unit = (largest
+    camera-position extent + 3 m) / 2) into the scene's. Hand case: cameras spanning 2 m along x -> MonoSDF's unit
+    2.5 m; a scene unit of 5 m -> half the bias. An object keeps the bias. The trainer builds its init sphere with
+    the resolved radius; a number overrides it; anything else is an error."""
+    import methods.monosdf.trainer as trainer_module
+    from methods.monosdf.trainer import resolve_init_radius
+
+    poses = np.repeat(np.eye(4)[None], 3, axis=0)
+    poses[:, :3, 3] = [[0.0, 0.0, 1.5], [1.0, 0.5, 1.4], [2.0, 0.2, 1.6]]
+    room = dataclasses.replace(tiny_scene, source_format=source_format, cam_to_world=poses, scale_mat=np.diag([5.0, 5.0, 5.0, 1.0]))
+    assert resolve_init_radius("auto", room) == pytest.approx(bias * 2.5 / 5.0)
+    assert resolve_init_radius("auto", dataclasses.replace(room, kind="object")) == bias
+    assert resolve_init_radius(0.75, room) == 0.75
+    for bad in ("big", -0.5, True):
+        with pytest.raises(ValueError, match="init_radius"):
+            resolve_init_radius(bad, room)
+    scene = dataclasses.replace(tiny_scene, source_format=source_format)
+    built: list[float] = []
+    real = trainer_module.SDFNetwork
+    monkeypatch.setattr(trainer_module, "SDFNetwork", lambda *a, **kw: built.append(kw["init_radius"]) or real(*a, **kw))
+    _trainer(scene)
+    _trainer(scene, init_radius=0.75)
+    assert built == [resolve_init_radius("auto", scene), 0.75]
+    assert 0.3 < built[0] < 1.0
