@@ -55,6 +55,8 @@ def resolve_inside_out(value: Any, scene: Scene) -> bool:
 # so the same bias is converted into the scene's units: the sphere then lies where MonoSDF's would, relative to
 # the cameras (docs/studies/no-prior-fog-mode.md: at 0.9 of the room's own sphere it lies 0.7-1.6 m behind the
 # walls, and a no-prior run fogs). Objects and other kinds keep the bias as it is (their normalisation is MonoSDF's).
+# MonoSDF's Replica data was normalised from the GT mesh's bounding box instead (its script: github.com/autonomousvision/monosdf/issues/69,
+# scale line not seen); the camera rule stands in for it on Replica-format rooms (docs/studies/no-prior-fog-mode.md).
 INIT_RADIUS_OF_FORMAT = {"scannet": 0.9, "replica": 0.6, "dtu": 0.6}
 DEFAULT_INIT_RADIUS = 0.9
 MONOSDF_CAMERA_MARGIN_M = 3.0
