@@ -78,7 +78,7 @@ def resolve_init_radius(value: Any, scene: Scene) -> float:
         bias = INIT_RADIUS_OF_FORMAT.get(scene.source_format, DEFAULT_INIT_RADIUS)
         if scene.kind != "room":
             return bias
-        scene_unit_m = float(abs(np.linalg.det(np.asarray(scene.scale_mat, dtype=np.float64)[:3, :3]))) ** (1.0 / 3.0)
+        _, scene_unit_m = normalisation(scene)
         return bias * monosdf_unit_m(scene.cam_to_world) / scene_unit_m
     if isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0:
         return float(value)
