@@ -132,6 +132,11 @@ class Scene:
     def width(self) -> int:
         return int(self.images.shape[2])
 
+    @property
+    def metres_per_unit(self) -> float:
+        """World metres per normalised unit: the scale of ``scale_mat`` (cube root of |det| of its 3 x 3 part)."""
+        return float(np.cbrt(abs(np.linalg.det(np.asarray(self.scale_mat, dtype=np.float64)[:3, :3]))))
+
     def view_indices(self, split: str = "train") -> np.ndarray:
         """Indices of the views in ``split``; all views if the scene defines no such split."""
         if split in self.splits:

@@ -38,11 +38,6 @@ def split_stage_config(config: Mapping[str, Any]) -> tuple[dict[str, Any], dict[
     return {k: v for k, v in config.items() if k in keys}, {k: v for k, v in config.items() if k not in keys}
 
 
-def scene_radius_of(scale_mat: np.ndarray) -> float:
-    """Metres per normalised unit of a MonoSDF ``scale_mat`` (cube root of |det| of its 3 x 3 part)."""
-    return float(abs(np.linalg.det(np.asarray(scale_mat, dtype=np.float64)[:3, :3])) ** (1.0 / 3.0))
-
-
 @dataclass
 class UncertaintyResult:
     """Output of :func:`run_uncertainty_stage`.
@@ -116,7 +111,7 @@ def run_uncertainty_stage(
         raise ValueError(f"ref_depth must be ({n}, H, W) or ({n}, H/f, W/f), got {ref.shape}")
     mono = _nonfinite("mono_depth", np.asarray(scene.mono_depth, dtype=np.float32), cfg.nonfinite_depth)
     ref = _nonfinite("ref_depth", ref, cfg.nonfinite_depth)
-    radius = cfg.scene_radius if cfg.scene_radius is not None else scene_radius_of(scene.scale_mat)
+    radius = cfg.scene_radius if cfg.scene_radius is not None else scene.metres_per_unit
     cfg = cfg.with_scene_radius(radius)
     timings: dict[str, float] = {}
     t_all = t0 = time.perf_counter()

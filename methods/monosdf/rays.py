@@ -40,9 +40,7 @@ class RayBundle:
 
 def normalisation(scene: Scene) -> tuple[np.ndarray, float]:
     """(centre (3,), scale) of the scene's ``scale_mat`` (a similarity: uniform scale + translation)."""
-    m = np.asarray(scene.scale_mat, dtype=np.float64)
-    s = float(np.cbrt(abs(np.linalg.det(m[:3, :3]))))
-    return m[:3, 3].copy(), s
+    return np.asarray(scene.scale_mat, dtype=np.float64)[:3, 3].copy(), scene.metres_per_unit
 
 
 def build_rays(scene: Scene, views: np.ndarray, radius: float) -> RayBundle:

@@ -30,7 +30,6 @@ from methods.monoinstance import (
     stage_defaults,
 )
 from methods.monoinstance.config import UncertaintyStageConfig
-from methods.monoinstance.stage import scene_radius_of
 from methods.monoinstance.uncertainty import ball_radius_norm
 
 
@@ -255,7 +254,7 @@ def test_stage_config_values_live_in_the_yaml_only_and_bad_keys_are_errors():
 
 
 def test_scene_radius_and_save_maps(tiny_scene, tiny_result, tmp_path):
-    assert scene_radius_of(tiny_scene.scale_mat) == pytest.approx(tiny_scene.scale_mat[0, 0])
+    assert tiny_scene.metres_per_unit == pytest.approx(tiny_scene.scale_mat[0, 0])
     paths = save_uncertainty_maps(tiny_result, tmp_path / "u")
     assert len(paths) == tiny_scene.num_views + 1
     from PIL import Image
