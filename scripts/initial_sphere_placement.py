@@ -1,0 +1,127 @@
+"""Where MonoSDF's geometric-init sphere starts relative to what the views see, per scene.
+
+An indoor MonoSDF run starts from an inside-out sphere of radius ``init_radius`` (normalised units) about
+the scene's centre: every camera ray first meets that sphere. This script casts every pixel's ray onto
+the sphere and compares the distance with the GT surface's: the share of pixels whose sphere point lies
+*behind* the GT surface (the field has to pull its surface in towards the cameras) and by how much, and
+the same for the bounding sphere (where the SDF is clamped: a surface every ray ends on). It also prints
+the room box, the camera extent and MonoSDF's own normalisation of the scene (its unit: half of the
+cameras' largest extent + 3 m), which ``init_radius: auto`` converts MonoSDF's bias from.
+
+Usage:
+    .venv/bin/python scripts/initial_sphere_placement.py SCENE [SCENE ...] [--scale small]
+        [--init-radius auto|R] [--bounding-sphere 1.0] [--meshes MESH.ply ...]
+
+``--meshes``: reconstructed meshes of the (last) scene, world metres (``bench study convergence`` writes every
+snapshot to ``OUT/meshes/``): the area-weighted distance of their faces from the scene's centre (10 / 50 /
+90 %) and the share of their area lying on the bounding sphere (within 2 % of its radius), where a run
+that never formed the room leaves its surface.
+
+SCENE is a recipe name (made or taken from the cache) or a dataset folder. Distances are Euclidean along
+the ray, metres; GT z-depth is converted with the ray's z component (OpenCV camera axes).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+
+def sphere_exit_distance(origins: np.ndarray, dirs: np.ndarray, radius: float) -> np.ndarray:
+    """(P,) distance along unit ``dirs`` (P, 3) from ``origins`` (P, 3) to the far intersection with a sphere of
+    ``radius`` about 0 (same units as the inputs); NaN where the ray misses it."""
+    b = np.einsum("pi,pi->p", origins, dirs)
+    c = np.einsum("pi,pi->p", origins, origins) - radius**2
+    disc = b * b - c
+    return np.where(disc >= 0, -b + np.sqrt(np.maximum(disc, 0.0)), np.nan)
+
+
+def sphere_minus_surface(scene, centre: np.ndarray, unit_m: float, radius: float) -> tuple[np.ndarray, int]:
+    """Per GT pixel (views whose camera stands inside the sphere, pixels with GT depth > 0, concatenated): the
+    distance along its ray to the sphere of ``radius`` (normalised units) about ``centre`` (world, metres)
+    minus the distance to the GT surface, metres (> 0: the sphere lies behind the surface); and the number
+    of views left out because their camera stands outside the sphere (``unit_m``: metres per unit)."""
+    from metrics.camera import pixel_rays
+
+    out, outside = [], 0
+    for v in range(len(scene.cam_to_world)):
+        K, c2w = scene.intrinsics[v], scene.cam_to_world[v]
+        if np.linalg.norm((c2w[:3, 3] - centre) / unit_m) >= radius:
+            outside += 1  # the camera stands outside this sphere: no inside-out start for its rays
+            continue
+        d_cam = pixel_rays(K, scene.height, scene.width).reshape(-1, 3)  # z = 1
+        norm = np.linalg.norm(d_cam, axis=1)
+        d_world = (d_cam / norm[:, None]) @ c2w[:3, :3].T
+        o = np.broadcast_to((c2w[:3, 3] - centre) / unit_m, d_world.shape)
+        t_sphere = sphere_exit_distance(o, d_world, radius) * unit_m
+        z = np.asarray(scene.gt_depth[v], dtype=np.float64).reshape(-1)
+        ok = z > 0
+        out.append(t_sphere[ok] - z[ok] * norm[ok])  # z-depth -> distance along the ray (d_cam has z = 1)
+    return (np.concatenate(out) if out else np.zeros(0)), outside
+
+
+def main() -> None:
+    from bench.data.datasets import load_dataset
+    from bench.data.formats import load_scene
+    from methods.monosdf.trainer import monosdf_unit_m, resolve_init_radius
+
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("scenes", nargs="+")
+    ap.add_argument("--scale", default="small")
+    ap.add_argument("--init-radius", default="auto", help="'auto' (the default of configs/methods/monosdf.yaml) or a number")
+    ap.add_argument("--bounding-sphere", type=float, default=1.0)
+    ap.add_argument("--meshes", nargs="*", default=[])
+    args = ap.parse_args()
+    init = args.init_radius if args.init_radius == "auto" else float(args.init_radius)
+
+    for name in args.scenes:
+        scene = load_scene(Path(name)) if Path(name).is_dir() else load_dataset(name, args.scale)
+        if scene.gt_depth is None:
+            raise SystemExit(f"{name}: needs GT depth")
+        centre, unit = scene.scale_mat[:3, 3], scene.metres_per_unit
+        radius = resolve_init_radius(init, scene)
+        cams = scene.cam_to_world[:, :3, 3]
+        extent = cams.max(axis=0) - cams.min(axis=0)
+        print(f"== {scene.name} ({scene.source_format}, {scene.num_views} views)")
+        if scene.gt_mesh_path is not None:
+            import trimesh
+
+            lo, hi = trimesh.load(scene.gt_mesh_path, force="mesh", process=False).bounds
+            print(f"  GT box {np.round(hi - lo, 2)} m; walls / floor / ceiling from the centre: "
+                  f"x {centre[0] - lo[0]:.2f} / {hi[0] - centre[0]:.2f}, y {centre[1] - lo[1]:.2f} / {hi[1] - centre[1]:.2f}, "
+                  f"z {centre[2] - lo[2]:.2f} / {hi[2] - centre[2]:.2f} m")
+            gap = np.minimum(cams.min(axis=0) - lo, hi - cams.max(axis=0))
+            print(f"  camera extent {np.round(extent, 2)} m; least gap between the camera extent and the box: "
+                  f"x {gap[0]:.2f}, y {gap[1]:.2f} m")
+        print(f"  scene unit {unit:.3f} m; MonoSDF's unit (largest camera extent + 3 m) / 2 = {monosdf_unit_m(scene.cam_to_world):.3f} m")
+        print(f"  init sphere {radius:.3f} units = {radius * unit:.2f} m; bounding sphere {args.bounding_sphere} = "
+              f"{args.bounding_sphere * unit:.2f} m")
+        for label, r in (("init sphere", radius), ("bounding sphere", args.bounding_sphere)):
+            excess, outside = sphere_minus_surface(scene, centre, unit, r)
+            if excess.size == 0:
+                print(f"  {label}: every camera stands outside it")
+                continue
+            b = excess > 0
+            q = lambda x: "-" if x.size == 0 else f"{np.median(x):.2f} ({np.quantile(x, 0.1):.2f}-{np.quantile(x, 0.9):.2f})"
+            print(f"  {label}: behind the GT surface on {b.mean():.1%} of the pixels, by {q(excess[b])} m "
+                  f"(median, 10-90 %); in front on {1 - b.mean():.1%}, by {q(-excess[~b])} m"
+                  + (f"; {outside} of {scene.num_views} cameras stand outside it (left out)" if outside else ""))
+
+    for path in args.meshes:
+        import trimesh
+
+        mesh = trimesh.load(path, force="mesh", process=False)
+        area = mesh.area_faces
+        dist = np.linalg.norm(mesh.triangles_center - centre, axis=1)
+        order = np.argsort(dist)
+        cdf = np.cumsum(area[order]) / area.sum()
+        p10, p50, p90 = (float(dist[order][np.searchsorted(cdf, q)]) for q in (0.1, 0.5, 0.9))
+        on_bound = float(area[dist > 0.98 * args.bounding_sphere * unit].sum() / area.sum())
+        print(f"  {path}: {area.sum():.0f} m2; face distance from the centre {p10:.2f} / {p50:.2f} / {p90:.2f} m "
+              f"(10 / 50 / 90 %, by area); on the bounding sphere {on_bound:.0%}")
+
+
+if __name__ == "__main__":
+    main()
