@@ -29,33 +29,22 @@ from pathlib import Path
 import numpy as np
 
 
-def sphere_exit_distance(origins: np.ndarray, dirs: np.ndarray, radius: float) -> np.ndarray:
-    """(P,) distance along unit ``dirs`` (P, 3) from ``origins`` (P, 3) to the far intersection with a sphere of
-    ``radius`` about 0 (same units as the inputs); NaN where the ray misses it."""
-    b = np.einsum("pi,pi->p", origins, dirs)
-    c = np.einsum("pi,pi->p", origins, origins) - radius**2
-    disc = b * b - c
-    return np.where(disc >= 0, -b + np.sqrt(np.maximum(disc, 0.0)), np.nan)
-
-
 def sphere_minus_surface(scene, centre: np.ndarray, unit_m: float, radius: float) -> tuple[np.ndarray, int]:
     """Per GT pixel (views whose camera stands inside the sphere, pixels with GT depth > 0, concatenated): the
     distance along its ray to the sphere of ``radius`` (normalised units) about ``centre`` (world, metres)
     minus the distance to the GT surface, metres (> 0: the sphere lies behind the surface); and the number
     of views left out because their camera stands outside the sphere (``unit_m``: metres per unit)."""
-    from metrics.camera import pixel_rays
+    from methods.monosdf.rays import camera_rays, sphere_exit_distance
 
     out, outside = [], 0
     for v in range(len(scene.cam_to_world)):
         K, c2w = scene.intrinsics[v], scene.cam_to_world[v]
-        if np.linalg.norm((c2w[:3, 3] - centre) / unit_m) >= radius:
+        o = (c2w[:3, 3] - centre) / unit_m
+        if np.linalg.norm(o) >= radius:
             outside += 1  # the camera stands outside this sphere: no inside-out start for its rays
             continue
-        d_cam = pixel_rays(K, scene.height, scene.width).reshape(-1, 3)  # z = 1
-        norm = np.linalg.norm(d_cam, axis=1)
-        d_world = (d_cam / norm[:, None]) @ c2w[:3, :3].T
-        o = np.broadcast_to((c2w[:3, 3] - centre) / unit_m, d_world.shape)
-        t_sphere = sphere_exit_distance(o, d_world, radius) * unit_m
+        d_world, norm = camera_rays(K, c2w, scene.height, scene.width)
+        t_sphere = sphere_exit_distance(o, d_world, radius) * unit_m  # the trainer's ray set-up (build_rays)
         z = np.asarray(scene.gt_depth[v], dtype=np.float64).reshape(-1)
         ok = z > 0
         out.append(t_sphere[ok] - z[ok] * norm[ok])  # z-depth -> distance along the ray (d_cam has z = 1)
@@ -65,6 +54,7 @@ def sphere_minus_surface(scene, centre: np.ndarray, unit_m: float, radius: float
 def main() -> None:
     from bench.data.datasets import load_dataset
     from bench.data.formats import load_scene
+    from methods.monosdf.rays import normalisation
     from methods.monosdf.trainer import monosdf_unit_m, resolve_init_radius
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -80,7 +70,7 @@ def main() -> None:
         scene = load_scene(Path(name)) if Path(name).is_dir() else load_dataset(name, args.scale)
         if scene.gt_depth is None:
             raise SystemExit(f"{name}: needs GT depth")
-        centre, unit = scene.scale_mat[:3, 3], scene.metres_per_unit
+        centre, unit = normalisation(scene)
         radius = resolve_init_radius(init, scene)
         cams = scene.cam_to_world[:, :3, 3]
         extent = cams.max(axis=0) - cams.min(axis=0)

@@ -1,4 +1,5 @@
-"""scripts/initial_sphere_placement.py on a camera at the sphere's centre looking at a plane at a known depth."""
+"""scripts/initial_sphere_placement.py (and the ray-sphere exit it shares with the trainer's build_rays) on a camera
+looking at a plane at a known depth."""
 
 from __future__ import annotations
 
@@ -18,14 +19,15 @@ def _camera_before_a_plane(depth_m: float, camera_at: np.ndarray) -> SimpleNames
                            gt_depth=np.full((1, H, W), depth_m))
 
 
-def test_sphere_exit_distance_from_the_centre_is_the_radius_and_off_centre_solves_the_quadratic(load_script):
-    script = load_script("initial_sphere_placement")
+def test_sphere_exit_distance_from_the_centre_is_the_radius_and_off_centre_solves_the_quadratic():
+    from methods.monosdf.rays import sphere_exit_distance
+
     dirs = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 0.6, 0.8]])
-    np.testing.assert_allclose(script.sphere_exit_distance(np.zeros((3, 3)), dirs, 2.5), 2.5)
+    np.testing.assert_allclose(sphere_exit_distance(np.zeros(3), dirs, 2.5), 2.5)
     # from (1, 0, 0) along +x the sphere of radius 3 is 2 away, along -x 4, along +y sqrt(9 - 1)
-    o = np.array([[1.0, 0.0, 0.0]] * 3)
+    o = np.array([1.0, 0.0, 0.0])
     d = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-    np.testing.assert_allclose(script.sphere_exit_distance(o, d, 3.0), [2.0, 4.0, np.sqrt(8.0)])
+    np.testing.assert_allclose(sphere_exit_distance(o, d, 3.0), [2.0, 4.0, np.sqrt(8.0)])
 
 
 def test_a_sphere_beyond_the_plane_is_behind_it_by_the_distance_along_each_ray(load_script):

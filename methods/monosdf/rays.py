@@ -43,6 +43,22 @@ def normalisation(scene: Scene) -> tuple[np.ndarray, float]:
     return np.asarray(scene.scale_mat, dtype=np.float64)[:3, 3].copy(), scene.metres_per_unit
 
 
+def camera_rays(K: np.ndarray, cam_to_world: np.ndarray, height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """(H*W, 3) float64 unit ray directions of every pixel in world axes (row-major), and (H*W,) the norm of each
+    pixel's z = 1 camera ray: a distance along the ray divided by it is the z-depth (OpenCV camera axes)."""
+    d_cam = pixel_rays(K, height, width).reshape(-1, 3)  # z = 1
+    norm = np.linalg.norm(d_cam, axis=1)
+    return (d_cam / norm[:, None]) @ cam_to_world[:3, :3].T, norm
+
+
+def sphere_exit_distance(origin: np.ndarray, dirs: np.ndarray, radius: float) -> np.ndarray:
+    """(P,) distance along unit ``dirs`` (P, 3) from ``origin`` (3,), inside a sphere of ``radius`` about 0, to
+    where each ray leaves it (the units of the inputs)."""
+    b = dirs @ origin
+    c = float(origin @ origin - radius**2)
+    return -b + np.sqrt(np.maximum(b * b - c, 0.0))
+
+
 def build_rays(scene: Scene, views: np.ndarray, radius: float) -> RayBundle:
     """Precompute rays of ``views``; raises BenchInputError if a camera is outside the bounding sphere.
 
@@ -53,17 +69,13 @@ def build_rays(scene: Scene, views: np.ndarray, radius: float) -> RayBundle:
     origins, dirs, zf, far, rots = [], [], [], [], []
     for v in views:
         K, c2w = scene.intrinsics[v], scene.cam_to_world[v]
-        d_cam = pixel_rays(K, scene.height, scene.width).reshape(-1, 3)  # z = 1
-        norm = np.linalg.norm(d_cam, axis=1)
-        d_world = (d_cam / norm[:, None]) @ c2w[:3, :3].T
+        d_world, norm = camera_rays(K, c2w, scene.height, scene.width)
         o = (c2w[:3, 3] - centre) / scale
         if np.linalg.norm(o) >= radius:
             raise BenchInputError(scene.root or scene.name, f"camera {int(v)} is outside the bounding sphere "
                                   f"(|c| = {np.linalg.norm(o):.3f} >= R = {radius} in normalised units); "
                                   "increase the method's bounding_sphere or fix the scene's scale_mat")
-        b = d_world @ o
-        c = float(o @ o - radius**2)
-        t_far = -b + np.sqrt(np.maximum(b * b - c, 0.0))
+        t_far = sphere_exit_distance(o, d_world, radius)
         origins.append(o)
         dirs.append(d_world)
         zf.append(1.0 / norm)

@@ -78,8 +78,7 @@ def resolve_init_radius(value: Any, scene: Scene) -> float:
         bias = INIT_RADIUS_OF_FORMAT.get(scene.source_format, DEFAULT_INIT_RADIUS)
         if scene.kind != "room":
             return bias
-        _, scene_unit_m = normalisation(scene)
-        return bias * monosdf_unit_m(scene.cam_to_world) / scene_unit_m
+        return bias * monosdf_unit_m(scene.cam_to_world) / scene.metres_per_unit
     if isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0:
         return float(value)
     raise ValueError(f"init_radius must be a positive number or 'auto', got {value!r}")
