@@ -6,7 +6,9 @@ the sphere and compares the distance with the GT surface's: the share of pixels 
 *behind* the GT surface (the field has to pull its surface in towards the cameras) and by how much, and
 the same for the bounding sphere (where the SDF is clamped: a surface every ray ends on). It also prints
 the room box, the camera extent and MonoSDF's own normalisation of the scene (its unit: half of the
-cameras' largest extent + 3 m), which ``init_radius: auto`` converts MonoSDF's bias from.
+cameras' largest extent + 3 m), which ``init_radius: auto`` converts MonoSDF's bias from, and the share of
+the GT surface's area beyond the bounding sphere in the scene's normalisation and in MonoSDF's (a surface
+the clamped SDF cannot represent).
 
 Usage:
     .venv/bin/python scripts/initial_sphere_placement.py SCENE [SCENE ...] [--scale small]
@@ -54,8 +56,9 @@ def sphere_minus_surface(scene, centre: np.ndarray, unit_m: float, radius: float
 def main() -> None:
     from bench.data.datasets import load_dataset
     from bench.data.formats import load_scene
+    from bench.data.normalisation import monosdf_indoor_scale_mat, monosdf_indoor_unit_m
     from methods.monosdf.rays import normalisation
-    from methods.monosdf.trainer import monosdf_unit_m, resolve_init_radius
+    from methods.monosdf.trainer import resolve_init_radius
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("scenes", nargs="+")
@@ -78,14 +81,20 @@ def main() -> None:
         if scene.gt_mesh_path is not None:
             import trimesh
 
-            lo, hi = trimesh.load(scene.gt_mesh_path, force="mesh", process=False).bounds
+            gt = trimesh.load(scene.gt_mesh_path, force="mesh", process=False)
+            lo, hi = gt.bounds
             print(f"  GT box {np.round(hi - lo, 2)} m; walls / floor / ceiling from the centre: "
                   f"x {centre[0] - lo[0]:.2f} / {hi[0] - centre[0]:.2f}, y {centre[1] - lo[1]:.2f} / {hi[1] - centre[1]:.2f}, "
                   f"z {centre[2] - lo[2]:.2f} / {hi[2] - centre[2]:.2f} m")
             gap = np.minimum(cams.min(axis=0) - lo, hi - cams.max(axis=0))
             print(f"  camera extent {np.round(extent, 2)} m; least gap between the camera extent and the box: "
                   f"x {gap[0]:.2f}, y {gap[1]:.2f} m")
-        print(f"  scene unit {unit:.3f} m; MonoSDF's unit (largest camera extent + 3 m) / 2 = {monosdf_unit_m(scene.cam_to_world):.3f} m")
+            mono = monosdf_indoor_scale_mat(scene.cam_to_world)
+            for label, c, u in (("this scene's", centre, unit), ("MonoSDF's", mono[:3, 3], mono[0, 0])):
+                beyond = np.linalg.norm(gt.triangles_center - c, axis=1) > args.bounding_sphere * u
+                print(f"  GT surface beyond the bounding sphere in {label} normalisation: "
+                      f"{gt.area_faces[beyond].sum() / gt.area:.1%} of its area")
+        print(f"  scene unit {unit:.3f} m; MonoSDF's unit (largest camera extent + 3 m) / 2 = {monosdf_indoor_unit_m(scene.cam_to_world):.3f} m")
         print(f"  init sphere {radius:.3f} units = {radius * unit:.2f} m; bounding sphere {args.bounding_sphere} = "
               f"{args.bounding_sphere * unit:.2f} m")
         for label, r in (("init sphere", radius), ("bounding sphere", args.bounding_sphere)):

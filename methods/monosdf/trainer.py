@@ -23,6 +23,7 @@ import trimesh
 from torch.profiler import record_function
 
 from bench.data.config import config_record
+from bench.data.normalisation import monosdf_indoor_unit_m
 from bench.data.scene import Scene
 from methods.base import Snapshot
 from methods.cpp_build import OwnClock
@@ -51,34 +52,26 @@ def resolve_inside_out(value: Any, scene: Scene) -> bool:
 # Geometric-init sphere radius (``init_radius: auto``). MonoSDF's configs set it per dataset (the IDR bias: 0.9 for
 # ScanNet, 0.6 for Replica and DTU) in MonoSDF's own normalisation of an indoor scene, where one unit is
 # (largest extent of the camera positions + 3 m) / 2 (preprocess/scannet_to_monosdf.py: "+3 because we assume each
-# camera sees 1.5 meters forward"). A room here is normalised by its own size (the unit sphere holds the room),
-# so the same bias is converted into the scene's units: the sphere then lies where MonoSDF's would, relative to
-# the cameras (docs/studies/no-prior-fog-mode.md: at 0.9 of the room's own sphere it lies 0.7-1.6 m behind the
+# camera sees 1.5 meters forward"). A room normalised otherwise (the Replica-like rooms: the unit sphere holds the
+# room) gets the same bias converted into its units (a factor 1 on the ScanNet-like rooms, which are normalised
+# MonoSDF's way): the sphere then lies where MonoSDF's would, relative to the cameras (docs/studies/no-prior-fog-mode.md: at 0.9 of the room's own sphere it lies 0.7-1.6 m behind the
 # walls, and a no-prior run fogs). Objects and other kinds keep the bias as it is (their normalisation is MonoSDF's).
 # MonoSDF's Replica data was normalised from the GT mesh's bounding box instead (its script: github.com/autonomousvision/monosdf/issues/69,
 # scale line not seen); the camera rule stands in for it on Replica-format rooms (docs/studies/no-prior-fog-mode.md).
 INIT_RADIUS_OF_FORMAT = {"scannet": 0.9, "replica": 0.6, "dtu": 0.6}
 DEFAULT_INIT_RADIUS = 0.9
-MONOSDF_CAMERA_MARGIN_M = 3.0
-
-
-def monosdf_unit_m(cam_to_world: np.ndarray) -> float:
-    """MonoSDF's normalisation of an indoor scene: the metres of one normalised unit, half of (the largest
-    extent of the camera positions + ``MONOSDF_CAMERA_MARGIN_M``). cam_to_world: (N, 4, 4), metres."""
-    positions = np.asarray(cam_to_world, dtype=np.float64)[:, :3, 3]
-    return (float((positions.max(axis=0) - positions.min(axis=0)).max()) + MONOSDF_CAMERA_MARGIN_M) / 2.0
 
 
 def resolve_init_radius(value: Any, scene: Scene) -> float:
     """The geometric-init sphere radius in the scene's normalised units: ``value`` itself, or for ``"auto"``
     MonoSDF's bias for ``scene.source_format`` (:data:`INIT_RADIUS_OF_FORMAT`, else :data:`DEFAULT_INIT_RADIUS`),
-    for a room converted from MonoSDF's normalisation (:func:`monosdf_unit_m`) into the scene's
+    for a room converted from MonoSDF's normalisation (:func:`bench.data.normalisation.monosdf_indoor_unit_m`) into the scene's
     (``scale_mat``: metres per unit)."""
     if value == "auto":
         bias = INIT_RADIUS_OF_FORMAT.get(scene.source_format, DEFAULT_INIT_RADIUS)
         if scene.kind != "room":
             return bias
-        return bias * monosdf_unit_m(scene.cam_to_world) / scene.metres_per_unit
+        return bias * monosdf_indoor_unit_m(scene.cam_to_world) / scene.metres_per_unit
     if isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0:
         return float(value)
     raise ValueError(f"init_radius must be a positive number or 'auto', got {value!r}")

@@ -144,6 +144,40 @@ def test_walk_stays_inside_the_room_and_clear_of_the_furniture(name):
     assert step.max() < 3 * np.median(step) + 0.15 and step.sum() > 2 * (sx + sy) * 0.5
 
 
+def test_walk_keeps_its_distance_from_the_walls():
+    """An empty room: the path is the room's outline inset by ``wall_distance`` (corners rounded off by the
+    smoothing, so they keep at least that distance); without it, midway between the centre's 40 % and the walls."""
+    from bench.data.synth.cameras import walk_loop
+
+    size = (6.0, 5.0, 2.5)
+    path = walk_loop(size, wall_distance=1.5)
+    gap = np.minimum.reduce([path[:, 0], size[0] - path[:, 0], path[:, 1], size[1] - path[:, 1]])
+    assert 1.5 - 0.1 < gap.min() and abs(np.median(gap) - 1.5) < 0.1  # (smoothing d / cos(angle) moves the sides out a little)
+    midway = walk_loop(size)
+    gap_mid = np.minimum.reduce([midway[:, 0], size[0] - midway[:, 0], midway[:, 1], size[1] - midway[:, 1]])
+    assert np.median(gap_mid) < 1.2  # (centre 2.5 m from the near walls: the stretch from 1.0 to 2.2 m out)
+    # where the inset outline lies inside what the clearance forbids, the path keeps the clearance instead
+    assert np.all(np.isfinite(walk_loop(size, wall_distance=2.6)))
+
+
+def test_a_room_can_be_normalised_as_monosdf_normalises_scannet():
+    """``room: {normalise: cameras}``: centre = middle of the camera positions' box, one unit = (largest
+    extent + 3 m) / 2 (MonoSDF's preprocess/scannet_to_monosdf.py); by default the room's circumscribed
+    sphere, 5 % over. ``cameras: {wall_distance: 1.5}`` keeps the walk about that far from the walls."""
+    raw = {"name": "x", "kind": "room", "format": "scannet", "preset": "scannet", "seed": 0,
+           "room": {"size": [5.8, 5.4, 2.6], "normalise": "cameras"}, "cameras": {"wall_distance": 1.5}}
+    layout = build_layout(parse_recipe(raw, "mem"), "small", np.random.default_rng([0, 0]))
+    c = layout.poses[:, :3, 3]
+    gap = np.minimum.reduce([c[:, 0], 5.8 - c[:, 0], c[:, 1], 5.4 - c[:, 1]])
+    assert 1.2 < np.median(gap) < 1.7
+    lo, hi = c.min(axis=0), c.max(axis=0)
+    unit = (float((hi - lo).max()) + 3.0) / 2
+    centre = (lo + hi) / 2
+    assert np.allclose(layout.scale_mat, [[unit, 0, 0, centre[0]], [0, unit, 0, centre[1]], [0, 0, unit, centre[2]], [0, 0, 0, 1]])
+    default = build_layout(parse_recipe({**raw, "room": {"size": [5.8, 5.4, 2.6]}}, "mem"), "small", np.random.default_rng([0, 0]))
+    assert np.allclose(default.scale_mat[:3, 3], [2.9, 2.7, 1.3]) and np.isclose(default.scale_mat[0, 0], 0.525 * np.linalg.norm([5.8, 5.4, 2.6]))
+
+
 def test_walk_shake_is_the_scannet_kind_and_replica_walks_are_smooth():
     scannet, _ = _layout("scannet_like_0", "small")
     replica, _ = _layout("replica_like_0", "small")
@@ -197,6 +231,9 @@ def test_the_walk_pins_the_room_scale_better_than_the_loop(load_script):
         ({"cameras": {"clearance": 0.01}}, r"\[cameras\]: config key 'clearance'"),
         ({"cameras": {"shake": "lots"}}, r"\[cameras\]: config key 'shake'"),
         ({"cameras": {"loop_radius": 0.2}}, r"\[cameras\.loop_radius\]: applies to path: loop, not to path: walk"),
+        ({"preset": "scannet-legacy", "cameras": {"wall_distance": 1.0}}, r"\[cameras\.wall_distance\]: applies to path: walk"),
+        ({"cameras": {"wall_distance": -1}}, r"\[cameras\]: config key 'wall_distance'"),
+        ({"room": {"normalise": "object"}}, r"\[room\]: config key 'normalise' must be one of"),
         ({"preset": "scannet-legacy", "cameras": {"sweeps": 3}}, r"\[cameras\.sweeps\]: applies to path: walk, not to path: loop"),
         ({"cameras": {"path": "loop"}}, r"\[cameras\.path\]: path: loop does not go with room\.arrangement: walls_and_table"),
         ({"preset": "scannet-legacy", "room": {"arrangement": "walls_and_table"}}, r"\[cameras\.path\]: path: loop does not go"),

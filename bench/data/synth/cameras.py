@@ -78,14 +78,17 @@ def walk_loop(
     min_clearance: float = 0.3,
     n_rays: int = 360,
     step: float = 0.01,
+    wall_distance: float | None = None,
 ) -> np.ndarray:
     """The closed floor path of a walk through the room ``[0, sx] x [0, sy]``: around the rectangle
     ``around`` (the table group; None = the middle of the room), midway between it and what stands along
-    the walls, smoothed, never closer than ``min_clearance`` metres to an obstacle or a wall.
+    the walls (``wall_distance`` None) or ``wall_distance`` metres from the walls, smoothed, never closer
+    than ``min_clearance`` metres to an obstacle or a wall.
 
     On each of ``n_rays`` rays from the centre of ``around`` the walkable stretch beyond it is found
-    (``step`` metres resolution); the path runs through the middle of those stretches, smoothed over
-    about 10 degrees and kept inside them.
+    (``step`` metres resolution); the path runs through the middle of those stretches, or where the ray
+    meets the room's outline inset by ``wall_distance``, smoothed over about 10 degrees and kept inside
+    the stretches (so where the group leaves less room, the path runs nearer the walls).
 
     Returns:
         (n_rays, 2) world x, y of the closed path, counter-clockwise.
@@ -118,10 +121,19 @@ def walk_loop(
         blocked = np.flatnonzero(~free[k, a:])
         b = a + (blocked[0] if blocked.size else len(r) - a)
         inner[k], outer[k] = r[a], r[b - 1]
-    radius = (inner + outer) / 2
+    radius = (inner + outer) / 2 if wall_distance is None else _ray_exit(focus, dirs, wall_distance, sx - wall_distance, wall_distance, sy - wall_distance)
     for _ in range(3):
         radius = np.clip(gaussian_filter1d(radius, sigma=n_rays / 36, mode="wrap"), inner, outer)
     return focus + radius[:, None] * dirs
+
+
+def _ray_exit(origin: np.ndarray, dirs: np.ndarray, x0: float, x1: float, y0: float, y1: float) -> np.ndarray:
+    """(R,) distance along each unit direction ``dirs`` (R, 2) from ``origin`` (2,) to where it leaves the
+    rectangle ``[x0, x1] x [y0, y1]`` (0 where ``origin`` lies outside it in that direction)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tx = np.where(dirs[:, 0] > 0, (x1 - origin[0]) / dirs[:, 0], np.where(dirs[:, 0] < 0, (x0 - origin[0]) / dirs[:, 0], np.inf))
+        ty = np.where(dirs[:, 1] > 0, (y1 - origin[1]) / dirs[:, 1], np.where(dirs[:, 1] < 0, (y0 - origin[1]) / dirs[:, 1], np.inf))
+    return np.maximum(np.minimum(tx, ty), 0.0)
 
 
 def room_walk(
@@ -136,8 +148,10 @@ def room_walk(
     shake_deg: float = 2.0,
     sweeps: int = 3,
     sweep_deg: float = 100.0,
+    wall_distance: float | None = None,
 ) -> np.ndarray:
-    """A hand-held scan of a room: one walk around :func:`walk_loop`'s path, frames in capture order.
+    """A hand-held scan of a room: one walk around :func:`walk_loop`'s path (``wall_distance``: see there),
+    frames in capture order.
 
     The operator walks the loop at a steady pace (``n_views`` frames equally spaced along it, a random
     start and direction) and turns the camera back and forth between the table group in the middle
@@ -155,7 +169,7 @@ def room_walk(
     Raises:
         ValueError: no walkable loop (see :func:`walk_loop`).
     """
-    loop = walk_loop(size, obstacles, around, min_clearance)
+    loop = walk_loop(size, obstacles, around, min_clearance, wall_distance=wall_distance)
     focus = around.centre if around is not None else np.array([size[0] / 2, size[1] / 2])
     closed = np.concatenate([loop, loop[:1]])
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(closed, axis=0), axis=1))])

@@ -23,6 +23,7 @@ import numpy as np
 import trimesh
 
 from bench.data.errors import BenchInputError
+from bench.data.normalisation import monosdf_indoor_scale_mat, sphere_scale_mat
 from bench.data.synth import cameras as cams
 from bench.data.synth.floorplan import Footprint
 from bench.data.synth.furnish import arrange_walls_and_table
@@ -130,13 +131,6 @@ class Layout:
     splits: dict[str, np.ndarray] = field(default_factory=dict)
     info: dict[str, Any] = field(default_factory=dict)
     lighting: RoomLighting | None = None
-
-
-def _sphere_scale_mat(centre: np.ndarray, radius: float) -> np.ndarray:
-    m = np.eye(4)
-    m[:3, :3] *= radius
-    m[:3, 3] = centre
-    return m
 
 
 def _image_size(recipe: Recipe, scale: str, default: Any) -> tuple[int, int]:
@@ -259,18 +253,21 @@ def build_room(recipe: Recipe, scale: str, rng: np.random.Generator, look_rng: n
         shake = camera.shake if camera.shake is not None else float(preset.get("shake", 0.0))
         try:
             poses = cams.room_walk(size, n_views, rng, obstacles=footprints, around=group, min_clearance=camera.clearance,
-                                   height_range=height_range, jitter=jitter, shake_deg=shake, sweeps=camera.sweeps, sweep_deg=camera.sweep)
+                                   height_range=height_range, jitter=jitter, shake_deg=shake, sweeps=camera.sweeps, sweep_deg=camera.sweep,
+                                   wall_distance=camera.wall_distance)
         except ValueError as exc:
             raise BenchInputError(recipe.where("cameras", "path"), f"walk: {exc}; give a larger room.size or fewer objects") from None
 
     K = np.repeat(cams.intrinsics(width, height, hfov)[None], n_views, axis=0)
-    centre = np.array(size) / 2
-    radius = 0.5 * float(np.linalg.norm(size)) * 1.05
+    if (room.normalise or "room") == "cameras":
+        scale_mat = monosdf_indoor_scale_mat(poses)
+    else:  # the room's circumscribed sphere, 5 % over
+        scale_mat = sphere_scale_mat(np.array(size) / 2, 0.5 * float(np.linalg.norm(size)) * 1.05)
     info: dict[str, Any] = {"preset": preset_name, "room_size_m": list(size), "objects_not_placed": dropped, "hfov_deg": hfov, "look": dressing.info}
     if path == "walk":
         info.update({"arrangement": arrangement, "camera_path": path, "placement": roles,
                      "camera_sweeps": cams.walk_sweeps(camera.sweeps, n_views)})
-    return Layout(objects, K, poses, height, width, _sphere_scale_mat(centre, radius), splits={"train": np.arange(n_views)}, info=info,
+    return Layout(objects, K, poses, height, width, scale_mat, splits={"train": np.arange(n_views)}, info=info,
                   lighting=dressing.lighting)
 
 
@@ -300,7 +297,7 @@ def build_object(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layout
     n = len(poses)
     K = np.repeat(cams.intrinsics(width, height, hfov)[None], n, axis=0)
     radius = 0.5 * float(np.linalg.norm(mesh.extents)) * 1.1
-    return Layout([ground, obj], K, poses, height, width, _sphere_scale_mat(centre, radius),
+    return Layout([ground, obj], K, poses, height, width, sphere_scale_mat(centre, radius),
                   splits={"train": np.arange(len(train_az)), "eval_only": np.arange(len(train_az), n)},
                   info={"object_extent_m": extent, "camera_distance_m": distance, "hfov_deg": hfov,
                         "object_bounds_m": mesh.bounds.tolist(),  # DTU protocol: evaluation box
@@ -370,7 +367,7 @@ def build_forward(recipe: Recipe, scale: str, rng: np.random.Generator) -> Layou
     train = rest[np.round(np.linspace(0, len(rest) - 1, 3)).astype(int)]
     centre = np.array([0.0, far / 2, 1.0])
     info.update(hfov_deg=hfov, object_depth_range_m=[float(d_lo), float(d_hi)], back_wall_m=far)
-    return Layout(objects, K, poses, height, width, _sphere_scale_mat(centre, far / 2 + 1.0),
+    return Layout(objects, K, poses, height, width, sphere_scale_mat(centre, far / 2 + 1.0),
                   splits={"train": train, "test": test}, info=info)
 
 

@@ -76,11 +76,15 @@ class RoomSection:
     ``arrangement`` of the furniture (None: the preset's): ``walls_and_table`` (pieces against the walls,
     lamps and plants in corners, the table with its chairs in the free floor;
     :func:`bench.data.synth.furnish.arrange_walls_and_table`) or ``scatter`` (random free floor spots,
-    away from a ``loop`` camera path)."""
+    away from a ``loop`` camera path); ``normalise``, the dataset's ``scale_mat``
+    (:mod:`bench.data.normalisation`): ``room`` (None; the room's circumscribed sphere, 5 % over, holds the
+    whole room) or ``cameras`` (MonoSDF's rule for ScanNet: the cameras' box + 1.5 m, so room corners
+    further out fall outside the unit sphere)."""
 
     size: tuple[Annotated[float, Range(lo=1, lo_open=True)], Annotated[float, Range(lo=1, lo_open=True)],
                 Annotated[float, Range(lo=1, lo_open=True)]] | None = None
     arrangement: Literal["walls_and_table", "scatter"] | None = None
+    normalise: Literal["room", "cameras"] | None = None
 
 
 @dataclass(frozen=True)
@@ -121,6 +125,8 @@ class RoomCameras:
     sweeps: Annotated[int, Range(lo=0, hi=100)] = 3           # walk: turns from the table group to the walls and back per loop
     sweep: Annotated[float, Range(lo=0, hi=180)] = 100.0      # walk: how far the heading turns away from the group, degrees
     clearance: Annotated[float, Range(lo=0.1, hi=1)] = 0.3    # walk: least distance from a camera to furniture and walls, m
+    wall_distance: Annotated[float, Range(lo=0, hi=5)] | None = None  # walk: the path's distance from the walls, m (None: midway
+                                                              # between the table group and the pieces along the walls)
 
     def check(self) -> str | None:
         if self.height is not None and self.height[0] > self.height[1]:
@@ -128,7 +134,7 @@ class RoomCameras:
         return None
 
 
-ROOM_CAMERA_KEYS_OF_PATH = {"loop": ("loop_radius",), "walk": ("shake", "sweeps", "sweep", "clearance")}
+ROOM_CAMERA_KEYS_OF_PATH = {"loop": ("loop_radius",), "walk": ("shake", "sweeps", "sweep", "clearance", "wall_distance")}
 
 
 @dataclass(frozen=True)
