@@ -12,7 +12,7 @@ the clamped SDF cannot represent).
 
 Usage:
     .venv/bin/python scripts/initial_sphere_placement.py SCENE [SCENE ...] [--scale small]
-        [--init-radius auto|R] [--bounding-sphere 1.0] [--meshes MESH.ply ...]
+        [--init-radius auto|R] [--bounding-sphere 1.0] [--meshes MESH.ply ...] [--plot PLAN.png]
 
 ``--meshes``: reconstructed meshes of the (last) scene, world metres (``bench study convergence`` writes every
 snapshot to ``OUT/meshes/``): the area-weighted distance of their faces from the scene's centre (10 / 50 /
@@ -53,6 +53,39 @@ def sphere_minus_surface(scene, centre: np.ndarray, unit_m: float, radius: float
     return (np.concatenate(out) if out else np.zeros(0)), outside
 
 
+def area_beyond(mesh, centre: np.ndarray, radius_m: float) -> float:
+    """Share of ``mesh``'s area (world metres) whose faces' centres lie further than ``radius_m`` from
+    ``centre`` (3,): the surface a bounding sphere of that radius cannot hold."""
+    beyond = np.linalg.norm(mesh.triangles_center - centre, axis=1) > radius_m
+    return float(mesh.area_faces[beyond].sum() / mesh.area)
+
+
+def floor_plans(plans: list[tuple[str, list[np.ndarray], np.ndarray, np.ndarray, float, float]], out: Path) -> None:
+    """One panel per scene, world x / y metres: the GT surface cut at the scene centre's height (grey lines),
+    the camera positions (blue), the initial sphere (orange) and the bounding sphere (red) at that height."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(plans), figsize=(4.2 * len(plans), 4.5), squeeze=False)
+    for ax, (name, lines, cams_xy, c, r_init, r_bound) in zip(axes[0], plans):
+        for line in lines:
+            ax.plot(line[:, 0], line[:, 1], "-", color="0.4", lw=0.8)
+        ax.plot(cams_xy[:, 0], cams_xy[:, 1], "o", color="tab:blue", ms=3, label="cameras")
+        for r, colour, label in ((r_init, "tab:orange", f"initial sphere {r_init:.2f} m"), (r_bound, "tab:red", f"bounding sphere {r_bound:.2f} m")):
+            ax.add_patch(plt.Circle((float(c[0]), float(c[1])), r, fill=False, color=colour, label=label))
+        ax.set_aspect("equal")
+        ax.autoscale_view()
+        ax.set_title(name)
+        ax.set_xlabel("x (m)")
+        ax.legend(loc="upper right", fontsize=7)
+    axes[0][0].set_ylabel("y (m)")
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    print(f"wrote {out}")
+
+
 def main() -> None:
     from bench.data.datasets import load_dataset
     from bench.data.formats import load_scene
@@ -66,7 +99,9 @@ def main() -> None:
     ap.add_argument("--init-radius", default="auto", help="'auto' (the default of configs/methods/monosdf.yaml) or a number")
     ap.add_argument("--bounding-sphere", type=float, default=1.0)
     ap.add_argument("--meshes", nargs="*", default=[])
+    ap.add_argument("--plot", help="write a floor plan of each scene here (PNG): GT surface, cameras, both spheres")
     args = ap.parse_args()
+    plans: list[tuple[str, list[np.ndarray], np.ndarray, np.ndarray, float, float]] = []
     init = args.init_radius if args.init_radius == "auto" else float(args.init_radius)
 
     for name in args.scenes:
@@ -89,11 +124,12 @@ def main() -> None:
             gap = np.minimum(cams.min(axis=0) - lo, hi - cams.max(axis=0))
             print(f"  camera extent {np.round(extent, 2)} m; least gap between the camera extent and the box: "
                   f"x {gap[0]:.2f}, y {gap[1]:.2f} m")
+            lines = list(trimesh.intersections.mesh_plane(gt, [0.0, 0.0, 1.0], [0.0, 0.0, float(centre[2])])[:, :, :2])
+            plans.append((scene.name if scene.name == name else f"{scene.name} ({Path(name).name})", lines, cams[:, :2], centre[:2], radius * unit, args.bounding_sphere * unit))
             mono = monosdf_indoor_scale_mat(scene.cam_to_world)
             for label, c, u in (("this scene's", centre, unit), ("MonoSDF's", mono[:3, 3], mono[0, 0])):
-                beyond = np.linalg.norm(gt.triangles_center - c, axis=1) > args.bounding_sphere * u
                 print(f"  GT surface beyond the bounding sphere in {label} normalisation: "
-                      f"{gt.area_faces[beyond].sum() / gt.area:.1%} of its area")
+                      f"{area_beyond(gt, c, args.bounding_sphere * u):.1%} of its area")
         print(f"  scene unit {unit:.3f} m; MonoSDF's unit (largest camera extent + 3 m) / 2 = {monosdf_indoor_unit_m(scene.cam_to_world):.3f} m")
         print(f"  init sphere {radius:.3f} units = {radius * unit:.2f} m; bounding sphere {args.bounding_sphere} = "
               f"{args.bounding_sphere * unit:.2f} m")
@@ -107,6 +143,9 @@ def main() -> None:
             print(f"  {label}: behind the GT surface on {b.mean():.1%} of the pixels, by {q(excess[b])} m "
                   f"(median, 10-90 %); in front on {1 - b.mean():.1%}, by {q(-excess[~b])} m"
                   + (f"; {outside} of {scene.num_views} cameras stand outside it (left out)" if outside else ""))
+
+    if args.plot and plans:
+        floor_plans(plans, Path(args.plot))
 
     for path in args.meshes:
         import trimesh

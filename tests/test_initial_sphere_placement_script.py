@@ -48,3 +48,14 @@ def test_a_sphere_short_of_the_plane_is_in_front_and_a_camera_outside_it_is_left
     assert outside == 0 and (excess < 0).all() and np.isclose(excess.max(), -1.0, atol=5e-3)
     excess, outside = script.sphere_minus_surface(_camera_before_a_plane(4.0, np.array([0.0, 0.0, 3.5])), np.zeros(3), 1.0, 3.0)
     assert outside == 1 and excess.size == 0
+
+
+def test_the_area_beyond_a_sphere_of_a_fine_square_is_one_minus_the_disc(load_script):
+    """A 4 x 4 m square (fine triangles) about the centre, a sphere of 1 m: pi / 16 of it lies inside."""
+    import trimesh
+
+    script = load_script("initial_sphere_placement")
+    plane = trimesh.creation.box(extents=[4.0, 4.0, 1e-3]).subdivide_to_size(0.02)
+    top = plane.submesh([np.flatnonzero(plane.face_normals[:, 2] > 0.5)], append=True)
+    assert np.isclose(script.area_beyond(top, np.zeros(3), 1.0), 1 - np.pi / 16, atol=0.01)
+    assert script.area_beyond(top, np.zeros(3), 3.0) == 0.0 and script.area_beyond(top, np.zeros(3), 0.0) == 1.0

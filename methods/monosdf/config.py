@@ -62,6 +62,7 @@ class MonoSDFConfig:
     color_hidden: Annotated[int, AtLeastOne]
     color_layers: Annotated[int, AtLeastOne]
     appearance_dim: Annotated[int, NonNegative]
+    color_view_dependent: bool
     pe_frequencies: Annotated[int, NonNegative]
     # optimiser
     lr: Annotated[float, Positive]

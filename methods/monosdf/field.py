@@ -335,10 +335,16 @@ class ColorNetwork(torch.nn.Module):
     ``appearance_dim > 0`` gives every training image a learned code of that size (MonoSDF's and the
     MonoInstance release's ``per_image_code = True``: 32-d, NeRF-in-the-wild), so per-image exposure /
     white balance is explained by the code instead of by the geometry. Codes start at U(-1e-4, 1e-4)
-    (MonoSDF)."""
+    (MonoSDF).
 
-    def __init__(self, geo_features: int = 15, hidden: int = 64, layers: int = 1, appearance_dim: int = 0, num_images: int = 0) -> None:
+    ``view_dependent=False`` feeds zeros for the view direction: a Lambertian radiance field, which cannot
+    paint one surface point differently for different views (a diagnostic; MonoSDF's network is view
+    dependent)."""
+
+    def __init__(self, geo_features: int = 15, hidden: int = 64, layers: int = 1, appearance_dim: int = 0, num_images: int = 0,
+                 view_dependent: bool = True) -> None:
         super().__init__()
+        self.view_dependent = bool(view_dependent)
         self.appearance_dim = int(appearance_dim)
         self.codes = torch.nn.Parameter(torch.empty(int(num_images) if self.appearance_dim else 0, self.appearance_dim).uniform_(-1e-4, 1e-4))
         dims = [9 + geo_features + self.appearance_dim] + [hidden] * layers + [3]
@@ -353,6 +359,8 @@ class ColorNetwork(torch.nn.Module):
                 image: int | torch.Tensor | None = None) -> torch.Tensor:
         """x, view_dirs, normals: (P, 3); geo: (P, G); image: training slot whose code is used, an int or
         (P,) per point (None = the mean code, for views without one) -> rgb (P, 3) in [0, 1]."""
+        if not self.view_dependent:
+            view_dirs = torch.zeros_like(view_dirs)
         first = cast(torch.nn.Linear, self.mlp[0])
         n_point = first.in_features - self.appearance_dim  # per-point inputs: x, view dir, normal, geo feature
         bias: torch.Tensor = first.bias
@@ -373,7 +381,7 @@ class ColorNetwork(torch.nn.Module):
                           image: int | torch.Tensor | None = None) -> torch.Tensor:
         """Slow, obviously-correct twin of :meth:`forward`: the MLP on the concatenated input
         ``[x, view dir, normal, geo feature, image code]`` (tests compare them)."""
-        parts = [x, view_dirs, normals, geo]
+        parts = [x, view_dirs if self.view_dependent else torch.zeros_like(view_dirs), normals, geo]
         if self.appearance_dim:
             if isinstance(image, torch.Tensor):
                 parts.append(self.codes[image])

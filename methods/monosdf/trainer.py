@@ -52,9 +52,9 @@ def resolve_inside_out(value: Any, scene: Scene) -> bool:
 # Geometric-init sphere radius (``init_radius: auto``). MonoSDF's configs set it per dataset (the IDR bias: 0.9 for
 # ScanNet, 0.6 for Replica and DTU) in MonoSDF's own normalisation of an indoor scene, where one unit is
 # (largest extent of the camera positions + 3 m) / 2 (preprocess/scannet_to_monosdf.py: "+3 because we assume each
-# camera sees 1.5 meters forward"). A room normalised otherwise (the Replica-like rooms: the unit sphere holds the
-# room) gets the same bias converted into its units (a factor 1 on the ScanNet-like rooms, which are normalised
-# MonoSDF's way): the sphere then lies where MonoSDF's would, relative to the cameras (docs/studies/no-prior-fog-mode.md: at 0.9 of the room's own sphere it lies 0.7-1.6 m behind the
+# camera sees 1.5 meters forward"). A room normalised otherwise (the shipped rooms: the unit sphere holds the room,
+# ``room.normalise: room``) gets the same bias converted into its units (a factor 1 under ``room.normalise:
+# cameras``): the sphere then lies where MonoSDF's would, relative to the cameras (docs/studies/no-prior-fog-mode.md: at 0.9 of the room's own sphere it lies 0.7-1.6 m behind the
 # walls, and a no-prior run fogs). Objects and other kinds keep the bias as it is (their normalisation is MonoSDF's).
 # MonoSDF's Replica data was normalised from the GT mesh's bounding box instead (its script: github.com/autonomousvision/monosdf/issues/69,
 # scale line not seen); the camera rule stands in for it on Replica-format rooms (docs/studies/no-prior-fog-mode.md).
@@ -132,7 +132,7 @@ class MonoSDFTrainer:
                               fast_grid=cfg.fast_grid, seed=seed, pe_frequencies=int(cfg.pe_frequencies),
                               skip=tuple(cfg.mlp_skip), weight_norm=cfg.weight_norm)
         self.color = ColorNetwork(cfg.geo_features, cfg.color_hidden, cfg.color_layers,
-                                  appearance_dim=int(cfg.appearance_dim), num_images=V)
+                                  appearance_dim=int(cfg.appearance_dim), num_images=V, view_dependent=cfg.color_view_dependent)
         self.density = LaplaceDensity(cfg.beta_init, cfg.beta_min)
         lr = float(cfg.lr)
         mlp_params = [p for n, p in self.sdf.named_parameters() if not n.startswith("grid.")]

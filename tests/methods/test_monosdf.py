@@ -307,6 +307,21 @@ def test_colour_network_folds_the_image_code_like_the_concatenated_input(image):
         torch.testing.assert_close(a, b, atol=1e-5, rtol=1e-4)
 
 
+def test_a_lambertian_colour_network_ignores_the_view_direction():
+    """``view_dependent=False``: the colour does not change with the view direction (fast path and twin);
+    the default network's does."""
+    torch.manual_seed(0)
+    P = 200
+    x, n, g = torch.randn(P, 3), torch.randn(P, 3), torch.randn(P, 5)
+    v1, v2 = torch.randn(P, 3), torch.randn(P, 3)
+    lambertian = ColorNetwork(geo_features=5, hidden=16, layers=1, appearance_dim=4, num_images=3, view_dependent=False)
+    for forward in (lambertian, lambertian.forward_reference):
+        torch.testing.assert_close(forward(x, v1, n, g, 1), forward(x, v2, n, g, 1))
+    torch.testing.assert_close(lambertian(x, v1, n, g, 1), lambertian.forward_reference(x, v2, n, g, 1), atol=1e-6, rtol=1e-5)
+    default = ColorNetwork(geo_features=5, hidden=16, layers=1, appearance_dim=4, num_images=3)
+    assert (default(x, v1, n, g, 1) - default(x, v2, n, g, 1)).abs().max() > 1e-3
+
+
 @pytest.mark.parametrize("pe", [0, 6])
 def test_geometric_init_is_a_sphere_and_clamp_holds(pe):
     net = SDFNetwork(_spec(), hidden=64, layers=2, geo_features=4, radius=1.0, init_radius=0.6, inside_out=True, pe_frequencies=pe)
