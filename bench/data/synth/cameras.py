@@ -106,9 +106,7 @@ def walk_loop(
     if around is not None:
         start = np.argmax((around.distance(pts) >= min_clearance).reshape(n_rays, len(r)), axis=1)
     else:  # no group in the middle: walk no nearer to the centre than 40 % of the way to the walls
-        with np.errstate(divide="ignore"):
-            to_wall = np.min(np.where(dirs > 0, (np.array([sx, sy]) - focus) / dirs, np.where(dirs < 0, -focus / dirs, np.inf)), axis=1)
-        start = np.searchsorted(r, 0.4 * to_wall)
+        start = np.searchsorted(r, 0.4 * _ray_exit(focus, dirs, 0.0, sx, 0.0, sy))
     inner, outer = np.zeros(n_rays), np.zeros(n_rays)
     for k in range(n_rays):
         walkable = np.flatnonzero(free[k, start[k]:])

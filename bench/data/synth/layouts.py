@@ -259,7 +259,7 @@ def build_room(recipe: Recipe, scale: str, rng: np.random.Generator, look_rng: n
             raise BenchInputError(recipe.where("cameras", "path"), f"walk: {exc}; give a larger room.size or fewer objects") from None
 
     K = np.repeat(cams.intrinsics(width, height, hfov)[None], n_views, axis=0)
-    if (room.normalise or "room") == "cameras":
+    if room.normalise == "cameras":
         scale_mat = monosdf_indoor_scale_mat(poses)
     else:  # the room's circumscribed sphere, 5 % over
         scale_mat = sphere_scale_mat(np.array(size) / 2, 0.5 * float(np.linalg.norm(size)) * 1.05)
