@@ -2,4 +2,6 @@
 tables and reports. Data flows one way: recipe -> dataset folder -> Scene -> method -> metrics -> row
 -> table (see docs/architecture.md)."""
 
-__version__ = "0.2.0"
+from bench.data.version import __version__
+
+__all__ = ["__version__"]

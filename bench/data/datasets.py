@@ -25,9 +25,9 @@ import uuid
 from pathlib import Path
 from typing import Any, Mapping
 
-from bench import __version__
 from bench.data.errors import BenchInputError
 from bench.data.scene import Scene
+from bench.data.version import __version__
 
 REPO_ROOT = Path(__file__).resolve().parents[2]  # bench/data/datasets.py -> the repository
 SCENES_DIR = REPO_ROOT / "configs" / "scenes"

@@ -15,7 +15,6 @@ from typing import Any, cast
 import numpy as np
 import trimesh
 
-from bench import __version__
 from bench.data.atomic import atomic_directory
 from bench.data.datasheet import CARD_NAME, compute_datasheet, write_card
 from bench.data.errors import BenchInputError
@@ -23,6 +22,7 @@ from bench.data.scene import InstanceInfo, Scene
 from bench.data.synth.layouts import build_layout
 from bench.data.synth.recipe import SCALES, Recipe, load_recipe, resolve_scale, with_effect_overrides
 from bench.data.synth.render import SceneRaycaster
+from bench.data.version import __version__
 
 
 def make_scene(
