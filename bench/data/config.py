@@ -58,6 +58,13 @@ class Range:
         return f"in {left}{lo}, {hi}{right}"
 
 
+# The bounds the typed configs of the methods share (``Annotated[float, Positive]``).
+Positive = Range(lo=0, lo_open=True)
+NonNegative = Range(lo=0)
+Fraction = Range(lo=0, hi=1)  # of a training schedule, a probability, a share
+AtLeastOne = Range(lo=1)
+
+
 class _Mismatch(Exception):
     """A value does not fit its annotation (internal; becomes a BenchInputError with the key path)."""
 

@@ -11,8 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Annotated, Any, Literal
 
-from bench.data.config import Range
-from methods.monosdf.config import AtLeastOne, Fraction, NonNegative, Positive
+from bench.data.config import AtLeastOne, Fraction, NonNegative, Positive, Range
 
 
 @dataclass(frozen=True)

@@ -21,9 +21,9 @@ from typing import Annotated, Any, Literal
 
 import yaml
 
-from bench.data.config import Range, load_config
+from bench.data.config import AtLeastOne, Fraction, NonNegative, Positive, Range, load_config
 from bench.data.errors import BenchInputError
-from methods.monosdf.config import AtLeastOne, Fraction, MonoSDFConfig, NonNegative, Positive
+from methods.monosdf.config import MonoSDFConfig
 
 STAGE_CONFIG_PATH = Path(__file__).resolve().parents[2] / "configs" / "methods" / "monoinstance_uncertainty.yaml"
 Degrees = Range(lo=0, hi=180)

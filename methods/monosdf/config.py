@@ -14,12 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Annotated, Literal
 
-from bench.data.config import Range
-
-Positive = Range(lo=0, lo_open=True)
-NonNegative = Range(lo=0)
-Fraction = Range(lo=0, hi=1)
-AtLeastOne = Range(lo=1)
+from bench.data.config import AtLeastOne, Fraction, NonNegative, Positive, Range
 
 
 @dataclass(frozen=True)
