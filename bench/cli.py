@@ -273,7 +273,8 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def cmd_study_convergence(args: argparse.Namespace) -> int:
-    from bench.study import parse_overrides, run_study
+    from bench.overrides import parse_overrides
+    from bench.study import run_study
 
     overrides = parse_overrides(args.set)
     out = Path(args.out) if args.out else DEFAULT_OUT / "studies" / f"{args.method}-{Path(args.scene).name}-{args.scale}"
@@ -319,7 +320,7 @@ def cmd_config(args: argparse.Namespace) -> int:
     from typing import get_type_hints
 
     from bench.data.config import describe_type
-    from bench.study import parse_overrides
+    from bench.overrides import parse_overrides
     from methods.registry import config_type, method_config
 
     cfg = method_config(args.method, args.scale, parse_overrides(args.set))
@@ -336,7 +337,7 @@ def cmd_config(args: argparse.Namespace) -> int:
 
 def cmd_fit(args: argparse.Namespace) -> int:
     from bench.fit import fit_folder
-    from bench.study import parse_overrides
+    from bench.overrides import parse_overrides
 
     if args.seed < 0:
         raise BenchInputError("--seed", f"must be a non-negative integer, got {args.seed}")

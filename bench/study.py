@@ -28,11 +28,11 @@ from typing import Any, Callable
 
 import numpy as np
 import pandas as pd
-import yaml
 
 from bench.convergence import ConvergenceSpec, check_run
 from bench.data.atomic import atomic_write_bytes, atomic_write_text
 from bench.data.errors import BenchInputError
+from bench.overrides import parse_sweep
 from bench.scales import is_smoke, smoke_note
 
 
@@ -56,43 +56,6 @@ class StudyRun:
         """File name of the final mesh: ``<key>=<value>_seed<seed>.ply`` (``run_seed<seed>.ply`` without a sweep)."""
         tag = f"{self.sweep_key}={json.dumps(self.sweep_value)}" if self.sweep_key else "run"
         return f"{tag}_seed{self.seed}.ply".replace("/", "_").replace(" ", "")
-
-
-def parse_value(text: str) -> Any:
-    """A config value from the command line, parsed as YAML (``0.5`` -> float, ``true`` -> bool, ``[1, 2]``);
-    ``1e-3``, which YAML 1.1 reads as a string, is a float too."""
-    value = yaml.safe_load(text)
-    if isinstance(value, str):
-        try:
-            return float(value)
-        except ValueError:
-            return value
-    return value
-
-
-def parse_overrides(items: list[str] | None, flag: str = "--set") -> dict[str, Any]:
-    """``["KEY=VALUE", ...]`` -> ``{key: parsed value}`` (:func:`parse_value`); a malformed item is a
-    BenchInputError naming ``flag``."""
-    out: dict[str, Any] = {}
-    for item in items or []:
-        if "=" not in item:
-            raise BenchInputError(flag, f"expected KEY=VALUE, got {item!r}")
-        key, value = item.split("=", 1)
-        out[key.strip()] = parse_value(value)
-    return out
-
-
-def parse_sweep(text: str | None) -> tuple[str | None, list[Any]]:
-    """``KEY=V1,V2,...`` -> (key, [values]); None -> (None, [None])."""
-    if not text:
-        return None, [None]
-    if "=" not in text:
-        raise BenchInputError("--sweep", f"expected KEY=V1,V2,..., got {text!r}")
-    key, vals = text.split("=", 1)
-    values = [parse_value(v) for v in vals.split(",") if v.strip()]
-    if not values:
-        raise BenchInputError("--sweep", f"no values for {key!r}")
-    return key.strip(), values
 
 
 EXACT_PRIORS = ("none", "both", "depth", "normal")

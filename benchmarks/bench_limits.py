@@ -64,7 +64,7 @@ def main() -> None:
     from torch.utils.flop_counter import FlopCounterMode
 
     from bench.data.datasets import load_dataset
-    from bench.study import parse_overrides
+    from bench.overrides import parse_overrides
     from methods.monosdf.trainer import WEIGHTED_SAMPLE, MonoSDFTrainer
     from methods.registry import typed_method_config
 

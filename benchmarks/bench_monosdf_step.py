@@ -153,7 +153,7 @@ def main() -> None:
     overrides = {"fast_grid": not args.reference_grid}
     if args.rays:
         overrides["rays_per_batch"] = args.rays
-    from bench.study import parse_overrides
+    from bench.overrides import parse_overrides
 
     overrides.update(parse_overrides(args.set))
     cfg = typed_method_config("monosdf", args.scale, overrides)

@@ -107,7 +107,7 @@ def main() -> None:
 
     from bench.data.datasets import load_dataset
     from bench.evaluate import evaluate_snapshot
-    from bench.study import parse_overrides
+    from bench.overrides import parse_overrides
     from methods.registry import get_method, method_config
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)

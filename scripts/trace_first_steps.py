@@ -22,7 +22,8 @@ def main() -> None:
     import torch
 
     from bench.data.config import load_config
-    from bench.study import load_study_scene, parse_overrides
+    from bench.overrides import parse_overrides
+    from bench.study import load_study_scene
     from methods.monosdf.config import MonoSDFConfig
     from methods.monosdf.trainer import MonoSDFTrainer
     from methods.registry import method_config

@@ -22,7 +22,7 @@ import torch
 
 def main() -> None:
     from bench.data.datasets import load_dataset
-    from bench.study import parse_overrides
+    from bench.overrides import parse_overrides
     from methods.monosdf.trainer import MonoSDFTrainer
     from methods.registry import typed_method_config
 

@@ -7,7 +7,8 @@ import pytest
 
 from bench.cli import main
 from bench.convergence import ConvergenceSpec
-from bench.study import convergence_checks, exact_priors_choice, load_study_scene, parse_sweep, study_convergence_spec
+from bench.overrides import parse_sweep
+from bench.study import convergence_checks, exact_priors_choice, load_study_scene, study_convergence_spec
 
 
 def test_convergence_checks_follow_the_issue_criteria():
