@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -60,7 +61,18 @@ def area_beyond(mesh, centre: np.ndarray, radius_m: float) -> float:
     return float(mesh.area_faces[beyond].sum() / mesh.area)
 
 
-def floor_plans(plans: list[tuple[str, list[np.ndarray], np.ndarray, np.ndarray, float, float]], out: Path) -> None:
+class FloorPlan(NamedTuple):
+    """One scene's panel of :func:`floor_plans` (world metres)."""
+
+    name: str
+    lines: list[np.ndarray]  # GT surface cut at the centre's height: (2, 2) segments, x / y
+    cameras_xy: np.ndarray  # (V, 2) camera positions
+    centre_xy: np.ndarray  # (2,) the spheres' centre
+    init_radius_m: float
+    bounding_radius_m: float
+
+
+def floor_plans(plans: list[FloorPlan], out: Path) -> None:
     """One panel per scene, world x / y metres: the GT surface cut at the scene centre's height (grey lines),
     the camera positions (blue), the initial sphere (orange) and the bounding sphere (red) at that height."""
     import matplotlib
@@ -87,6 +99,8 @@ def floor_plans(plans: list[tuple[str, list[np.ndarray], np.ndarray, np.ndarray,
 
 
 def main() -> None:
+    import trimesh
+
     from bench.data.datasets import load_dataset
     from bench.data.formats import load_scene
     from bench.data.normalisation import monosdf_indoor_scale_mat, monosdf_indoor_unit_m
@@ -101,7 +115,7 @@ def main() -> None:
     ap.add_argument("--meshes", nargs="*", default=[])
     ap.add_argument("--plot", help="write a floor plan of each scene here (PNG): GT surface, cameras, both spheres")
     args = ap.parse_args()
-    plans: list[tuple[str, list[np.ndarray], np.ndarray, np.ndarray, float, float]] = []
+    plans: list[FloorPlan] = []
     init = args.init_radius if args.init_radius == "auto" else float(args.init_radius)
 
     for name in args.scenes:
@@ -114,8 +128,6 @@ def main() -> None:
         extent = cams.max(axis=0) - cams.min(axis=0)
         print(f"== {scene.name} ({scene.source_format}, {scene.num_views} views)")
         if scene.gt_mesh_path is not None:
-            import trimesh
-
             gt = trimesh.load(scene.gt_mesh_path, force="mesh", process=False)
             lo, hi = gt.bounds
             print(f"  GT box {np.round(hi - lo, 2)} m; walls / floor / ceiling from the centre: "
@@ -125,7 +137,8 @@ def main() -> None:
             print(f"  camera extent {np.round(extent, 2)} m; least gap between the camera extent and the box: "
                   f"x {gap[0]:.2f}, y {gap[1]:.2f} m")
             lines = list(trimesh.intersections.mesh_plane(gt, [0.0, 0.0, 1.0], [0.0, 0.0, float(centre[2])])[:, :, :2])
-            plans.append((scene.name if scene.name == name else f"{scene.name} ({Path(name).name})", lines, cams[:, :2], centre[:2], radius * unit, args.bounding_sphere * unit))
+            plans.append(FloorPlan(scene.name if scene.name == name else f"{scene.name} ({Path(name).name})", lines, cams[:, :2], centre[:2], radius * unit,
+                                   args.bounding_sphere * unit))
             mono = monosdf_indoor_scale_mat(scene.cam_to_world)
             for label, c, u in (("this scene's", centre, unit), ("MonoSDF's", mono[:3, 3], mono[0, 0])):
                 print(f"  GT surface beyond the bounding sphere in {label} normalisation: "
@@ -148,8 +161,6 @@ def main() -> None:
         floor_plans(plans, Path(args.plot))
 
     for path in args.meshes:
-        import trimesh
-
         mesh = trimesh.load(path, force="mesh", process=False)
         area = mesh.area_faces
         dist = np.linalg.norm(mesh.triangles_center - centre, axis=1)
